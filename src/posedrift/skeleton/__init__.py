@@ -1,0 +1,33 @@
+"""The 15-joint skeleton, the 15 body parts, and the eight joint angles."""
+
+from posedrift.skeleton._angles import angles_dict, joint_angles, pelvis_centre
+from posedrift.skeleton._definitions import (
+    ANGLE_NAMES,
+    EXTRA_POINT_NAMES,
+    JOINT_INDEX,
+    JOINT_NAMES,
+    JOINT_PARENTS,
+    PART_COLOURS,
+    PART_INDEX,
+    PART_JOINTS,
+    PART_NAMES,
+    SEGMENT_RATIOS,
+)
+from posedrift.skeleton._tpose import t_pose_joints
+
+__all__ = [
+    "ANGLE_NAMES",
+    "EXTRA_POINT_NAMES",
+    "JOINT_INDEX",
+    "JOINT_NAMES",
+    "JOINT_PARENTS",
+    "PART_COLOURS",
+    "PART_INDEX",
+    "PART_JOINTS",
+    "PART_NAMES",
+    "SEGMENT_RATIOS",
+    "angles_dict",
+    "joint_angles",
+    "pelvis_centre",
+    "t_pose_joints",
+]

@@ -1,0 +1,94 @@
+"""The eight joint angles of Table 1, from 3-D joint positions alone."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from posedrift.skeleton._definitions import ANGLE_NAMES, JOINT_INDEX, JOINT_NAMES
+
+# (vertex joint, first arm end, second arm end) for the elbow and knee angles.
+_HINGES = {
+    "left_elbow": ("left_elbow", "left_shoulder", "left_hand"),
+    "right_elbow": ("right_elbow", "right_shoulder", "right_hand"),
+    "left_knee": ("left_knee", "left_hip", "left_foot"),
+    "right_knee": ("right_knee", "right_hip", "right_foot"),
+}
+# (proximal joint, distal joint): the limb measured against the trunk's downward axis.
+_TRUNK_RELATIVE = {
+    "left_shoulder": ("left_shoulder", "left_elbow"),
+    "right_shoulder": ("right_shoulder", "right_elbow"),
+    "left_hip": ("left_hip", "left_knee"),
+    "right_hip": ("right_hip", "right_knee"),
+}
+
+
+def _angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle in degrees between vectors along the last axis; NaN where either is zero."""
+    cross = np.linalg.norm(np.cross(a, b), axis=-1)
+    dot = np.sum(a * b, axis=-1)
+    with np.errstate(invalid="ignore"):
+        angle = np.degrees(np.arctan2(cross, dot))
+    degenerate = (np.linalg.norm(a, axis=-1) == 0) | (np.linalg.norm(b, axis=-1) == 0)
+    return np.where(degenerate, np.nan, angle)
+
+
+def pelvis_centre(joints: np.ndarray) -> np.ndarray:
+    """The mean of the two hips, ``(..., 3)``."""
+    joints = np.asarray(joints, dtype=float)
+    return 0.5 * (
+        joints[..., JOINT_INDEX["right_hip"], :] + joints[..., JOINT_INDEX["left_hip"], :]
+    )
+
+
+def joint_angles(joints: np.ndarray) -> np.ndarray:
+    """The eight angles of Table 1, in degrees.
+
+    The same function computes ground truth and estimates (``METHOD.md`` section 2):
+    elbow and knee are the angle at the joint between its two segments (180 when
+    straight); shoulder and hip are the angle between the limb's first segment and
+    the trunk's downward axis ``pelvis_centre - neck`` (about 0 when hanging, 90 in
+    a T-pose).
+
+    Parameters
+    ----------
+    joints : (..., 15, 3) float
+        Joint positions in any consistent unit, in :data:`JOINT_NAMES` order.
+
+    Returns
+    -------
+    angles : (..., 8) float
+        In :data:`ANGLE_NAMES` order; NaN where a needed joint is NaN or two
+        joints coincide.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from posedrift.skeleton import joint_angles, t_pose_joints
+    >>> np.round(joint_angles(t_pose_joints(1.75)), 1)
+    array([180., 180.,  90.,  90., 180., 180.,   0.,   0.])
+    """
+    joints = np.asarray(joints, dtype=float)
+    if joints.shape[-2:] != (len(JOINT_NAMES), 3):
+        raise ValueError(
+            f"The 'joints' argument of joint_angles must have shape (..., 15, 3). "
+            f"Got shape {joints.shape} instead."
+        )
+    j = {name: joints[..., i, :] for name, i in JOINT_INDEX.items()}
+    down = pelvis_centre(joints) - j["neck"]
+    out = []
+    for name in ANGLE_NAMES:
+        if name in _HINGES:
+            vertex, a, b = _HINGES[name]
+            out.append(_angle_between(j[a] - j[vertex], j[b] - j[vertex]))
+        else:
+            proximal, distal = _TRUNK_RELATIVE[name]
+            out.append(_angle_between(j[distal] - j[proximal], down))
+    return np.stack(out, axis=-1)
+
+
+def angles_dict(angles: np.ndarray) -> dict[str, float | None]:
+    """One frame's eight angles as ``{name: degrees}``; NaN becomes None (for JSON)."""
+    return {
+        name: (None if not np.isfinite(value) else float(value))
+        for name, value in zip(ANGLE_NAMES, np.asarray(angles, dtype=float), strict=True)
+    }
