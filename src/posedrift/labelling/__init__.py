@@ -1,0 +1,3 @@
+"""labelling"""
+
+__all__: list[str] = []

@@ -1,0 +1,3 @@
+"""points"""
+
+__all__: list[str] = []
