@@ -7,7 +7,15 @@ import importlib
 from posedrift.cli._app import app
 
 # Each module registers its commands on ``app`` (or its groups) when imported.
-_COMMAND_MODULES: tuple[str, ...] = ()
+_COMMAND_MODULES: tuple[str, ...] = (
+    "_train",
+    "_eval_labels",
+    "_synth",
+    "_bench_render",
+    "_bench_cpd",
+    "_view",
+    "_eval",
+)
 
 for _name in _COMMAND_MODULES:
     importlib.import_module(f"posedrift.cli.{_name}")

@@ -1,5 +1,57 @@
 """Evaluation against ground truth or a reference: metrics, protocols, harness."""
 
+from posedrift.evaluation._harness import (
+    DEFAULT_METHODS,
+    METHODS,
+    EvaluationRun,
+    MethodRun,
+    evaluate,
+    make_method,
+    parse_methods,
+    run_methods,
+    summarize,
+)
+from posedrift.evaluation._metrics import (
+    angle_errors,
+    failed_frames,
+    fill_forward,
+    joint_errors_m,
+    map_at,
+    mpjpe_mm,
+)
+from posedrift.evaluation._report import PAPER_TABLE1, markdown_table
 from posedrift.evaluation._types import EvaluationSequence, Reference
+from posedrift.evaluation._utd import (
+    KINECT20_NAMES,
+    KINECT20_TO_15,
+    find_utd_sequences,
+    kinect20_to_joints,
+    load_utd_sequence,
+)
 
-__all__ = ["EvaluationSequence", "Reference"]
+__all__ = [
+    "DEFAULT_METHODS",
+    "KINECT20_NAMES",
+    "KINECT20_TO_15",
+    "METHODS",
+    "PAPER_TABLE1",
+    "EvaluationRun",
+    "EvaluationSequence",
+    "MethodRun",
+    "Reference",
+    "angle_errors",
+    "evaluate",
+    "failed_frames",
+    "fill_forward",
+    "find_utd_sequences",
+    "joint_errors_m",
+    "kinect20_to_joints",
+    "load_utd_sequence",
+    "make_method",
+    "map_at",
+    "markdown_table",
+    "mpjpe_mm",
+    "parse_methods",
+    "run_methods",
+    "summarize",
+]

@@ -31,3 +31,13 @@ __all__ = [
     "pelvis_centre",
     "t_pose_joints",
 ]
+
+from posedrift.skeleton._fit import (
+    SkeletonFit,
+    fit_skeleton,
+    part_anchors,
+    prior_bone_lengths,
+)
+from posedrift.skeleton._meanshift import part_modes
+
+__all__ += ["SkeletonFit", "fit_skeleton", "part_anchors", "part_modes", "prior_bone_lengths"]

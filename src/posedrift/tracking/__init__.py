@@ -3,3 +3,9 @@
 from posedrift.tracking._result import FrameResult, FrameStatus, PoseMethod
 
 __all__ = ["FrameResult", "FrameStatus", "PoseMethod"]
+
+from posedrift.tracking._health import Health, assess
+from posedrift.tracking._init import Calibration, calibrate
+from posedrift.tracking._tracker import PoseTracker
+
+__all__ += ["Calibration", "Health", "PoseTracker", "assess", "calibrate"]

@@ -1,0 +1,409 @@
+"""The evaluation harness: every method on the same frames, in one run.
+
+Methods receive the depth frames (and, through them, the intrinsics) and nothing
+else; the reference goes to the metrics only. Each method is built by a factory
+registered in :data:`METHODS`, for each sequence afresh, with one body-part forest
+shared by all of them (loaded once).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from posedrift.camera import DepthFrame, Intrinsics, project
+from posedrift.evaluation._metrics import (
+    angle_errors,
+    failed_frames,
+    fill_forward,
+    map_at,
+    mpjpe_mm,
+)
+from posedrift.evaluation._types import EvaluationSequence, Reference
+from posedrift.skeleton import joint_angles
+from posedrift.tracking import FrameResult, FrameStatus, PoseMethod
+
+logger = logging.getLogger(__name__)
+
+MethodFactory = Callable[..., PoseMethod]
+"""``factory(intrinsics, *, forest) -> PoseMethod``."""
+
+
+def _tracker(**options: Any) -> MethodFactory:
+    def factory(intrinsics: Intrinsics, *, forest: Any = None) -> PoseMethod:
+        from posedrift.tracking import PoseTracker
+
+        return PoseTracker(intrinsics, forest=forest, **options)
+
+    return factory
+
+
+def _baseline(class_name: str) -> MethodFactory:
+    def factory(intrinsics: Intrinsics, *, forest: Any = None) -> PoseMethod:
+        import posedrift.baselines as baselines
+
+        return getattr(baselines, class_name)(intrinsics, forest=forest)
+
+    return factory
+
+
+METHODS: dict[str, tuple[str, MethodFactory]] = {
+    "cpd": ("the tracker: nonrigid CPD, relabelling, warm start, 400 points", _tracker()),
+    "shotton": (
+        "Shotton et al. 2011 per frame: forest labels, mean shift",
+        _baseline("ShottonBaseline"),
+    ),
+    "pda": ("Dinh et al. 2014 per frame: principal directions of parts", _baseline("PDABaseline")),
+    "icp": (
+        "the tracking loop with nearest-neighbour (ICP) correspondences",
+        _baseline("ICPTracker"),
+    ),
+    "cpd-norelabel": ("ablation: no geodesic relabelling", _tracker(relabel=False)),
+    "cpd-rigid": ("ablation: rigid instead of nonrigid CPD", _tracker(registration="rigid")),
+    "cpd-cold": ("ablation: no warm start of CPD", _tracker(warm_start=False)),
+    "cpd-200": ("ablation: 200 points", _tracker(n_points=200)),
+    "cpd-400": ("ablation: 400 points (the default)", _tracker(n_points=400)),
+    "cpd-800": ("ablation: 800 points", _tracker(n_points=800)),
+}
+"""Method name -> (description, factory ``f(intrinsics, *, forest) -> PoseMethod``)."""
+
+DEFAULT_METHODS: tuple[str, ...] = ("cpd", "shotton", "pda", "icp")
+
+
+def parse_methods(text: str | Sequence[str]) -> list[str]:
+    """``"cpd,shotton"`` (or a list) -> checked method names, in order, without repeats.
+
+    Raises
+    ------
+    ValueError
+        If a name is unknown; the message lists the valid ones.
+    """
+    names = [n.strip() for n in text.split(",")] if isinstance(text, str) else list(text)
+    names = [n for n in names if n]
+    if not names:
+        raise ValueError(f"No method given. Valid methods: {', '.join(METHODS)}.")
+    unknown = [n for n in names if n not in METHODS]
+    if unknown:
+        raise ValueError(f"Unknown method(s) {unknown}. Valid methods: {', '.join(METHODS)}.")
+    return list(dict.fromkeys(names))
+
+
+def make_method(name: str, intrinsics: Intrinsics, *, forest: Any = None) -> PoseMethod:
+    """Build a registered method for one camera.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`METHODS` (``cpd``, ``shotton``, ``pda``, ``icp``, ``cpd-rigid``...).
+    intrinsics : Intrinsics
+    forest : BodyPartForest, optional
+        Shared by all methods; each loads the default model when None.
+    """
+    (name,) = parse_methods([name])
+    return METHODS[name][1](intrinsics, forest=forest)
+
+
+@dataclass
+class MethodRun:
+    """One method's results on one sequence (what the metrics and figures need)."""
+
+    method: str
+    sequence: str
+    results: list[FrameResult]
+    seconds: float
+    label_hits: int = 0
+    label_total: int = 0
+    errors: list[str] = field(default_factory=list)
+
+    @property
+    def joints(self) -> np.ndarray:
+        """``(T, 15, 3)`` metres, NaN in failed frames."""
+        return np.stack([r.joints for r in self.results])
+
+    @property
+    def angles(self) -> np.ndarray:
+        """``(T, 8)`` degrees, from the joints (``FrameResult.angles``)."""
+        return joint_angles(self.joints)
+
+
+@dataclass
+class SequenceRecord:
+    """What the evaluation keeps of a sequence: its reference, and its frames for figures."""
+
+    name: str
+    reference: Reference
+    intrinsics: Intrinsics
+    frames: tuple[DepthFrame, ...] | None = None
+
+
+@dataclass
+class EvaluationRun:
+    """Everything one evaluation produced: per method, per sequence."""
+
+    protocol: str
+    sequences: list[SequenceRecord]
+    methods: list[str]
+    runs: dict[tuple[str, str], MethodRun]
+
+
+def label_hits(result: FrameResult, labels: np.ndarray, intrinsics: Intrinsics) -> tuple[int, int]:
+    """Labelled points of a result whose label matches the ground-truth label image.
+
+    Each point is projected to its pixel; points that land off the image or on
+    ground-truth background are not counted.
+
+    Returns
+    -------
+    hits, total : int
+    """
+    if len(result.points) == 0 or len(result.labels) != len(result.points):
+        return 0, 0
+    uv = np.rint(project(result.points, intrinsics)).astype(np.int64, copy=False)
+    h, w = labels.shape
+    inside = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+    truth = np.zeros(len(uv), dtype=np.int64)
+    truth[inside] = labels[uv[inside, 1], uv[inside, 0]]
+    counted = inside & (truth > 0)
+    hits = int(np.count_nonzero(truth[counted] == result.labels[counted] + 1))
+    return hits, int(np.count_nonzero(counted))
+
+
+def _progress(enabled: bool, total: int):
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=Console(stderr=True),
+        disable=not enabled,
+        transient=False,
+    )
+
+
+def run_methods(
+    sequences: Iterable[EvaluationSequence],
+    methods: Sequence[str] | Mapping[str, MethodFactory] = DEFAULT_METHODS,
+    *,
+    forest: Any = None,
+    progress: bool = True,
+    protocol: str | None = None,
+    keep_frames: bool = False,
+) -> EvaluationRun:
+    """Run every method over every sequence, the same frames for all.
+
+    Parameters
+    ----------
+    sequences : iterable of EvaluationSequence
+        Consumed one at a time (a generator keeps only one sequence's frames in
+        memory unless ``keep_frames``).
+    methods : sequence of str, or mapping of name -> factory
+        Names from :data:`METHODS`, or factories ``f(intrinsics, *, forest)``.
+    forest : BodyPartForest, optional
+        Shared by all methods. When None, the default model is loaded once here
+        (if the package has one) and shared.
+    progress : bool
+        Draw a progress bar on standard error.
+    protocol : str, optional
+        ``"synthetic"`` or ``"utd"``; inferred from the references by default.
+    keep_frames : bool
+        Keep the depth frames in the result (for figures).
+
+    Returns
+    -------
+    EvaluationRun
+    """
+    if isinstance(methods, Mapping):
+        factories = dict(methods)
+    else:
+        factories = {name: METHODS[name][1] for name in parse_methods(methods)}
+    if forest is None:
+        forest = _default_forest()
+    total = None
+    if isinstance(sequences, Sequence):
+        total = sum(len(s.frames) for s in sequences) * len(factories)
+    runs: dict[tuple[str, str], MethodRun] = {}
+    records: list[SequenceRecord] = []
+    with _progress(progress, total) as bar:
+        task = bar.add_task("evaluating", total=total)
+        for seq in sequences:
+            intrinsics = seq.frames[0].intrinsics
+            labels = seq.reference.labels
+            for name, factory in factories.items():
+                bar.update(task, description=f"{seq.name}: {name}")
+                method = factory(intrinsics, forest=forest)
+                run = MethodRun(method=name, sequence=seq.name, results=[], seconds=0.0)
+                for frame in seq.frames:
+                    start = time.perf_counter()
+                    try:
+                        result = method.process(frame)
+                    except Exception as exc:  # a method's failure is a failed frame, reported
+                        result = FrameResult.empty(
+                            frame.index, FrameStatus.LOST, f"{type(exc).__name__}: {exc}"
+                        )
+                        if len(run.errors) < 5:
+                            logger.warning(
+                                "%s failed on %s frame %d: %s", name, seq.name, frame.index, exc
+                            )
+                        run.errors.append(f"frame {frame.index}: {type(exc).__name__}: {exc}")
+                    run.seconds += time.perf_counter() - start
+                    run.results.append(result)
+                    if labels is not None:
+                        hits, counted = label_hits(result, labels[frame.index], intrinsics)
+                        run.label_hits += hits
+                        run.label_total += counted
+                    bar.advance(task)
+                runs[(name, seq.name)] = run
+            records.append(
+                SequenceRecord(
+                    name=seq.name,
+                    reference=seq.reference,
+                    intrinsics=intrinsics,
+                    frames=seq.frames if keep_frames else None,
+                )
+            )
+    if not records:
+        raise ValueError("No sequence to evaluate.")
+    if protocol is None:
+        kinds = {r.reference.kind for r in records}
+        protocol = "synthetic" if kinds == {"synthetic"} else "utd"
+    return EvaluationRun(protocol=protocol, sequences=records, methods=list(factories), runs=runs)
+
+
+def _default_forest() -> Any:
+    try:
+        from posedrift.labelling import BodyPartForest
+    except ImportError:
+        return None
+    return BodyPartForest.load_default()
+
+
+def _round(value: float | None, digits: int = 4) -> float | None:
+    return None if value is None else round(float(value), digits)
+
+
+def summarize(run: EvaluationRun) -> dict:
+    """The JSON of ``posedrift eval`` (``METHOD.md`` section 6) from a run.
+
+    Errors are computed over all frames of all sequences together; failed frames
+    (no pose) are counted and left out of the error means. Extra fields beyond
+    section 6: per method ``"filled"`` (the same errors with each failed frame
+    filled by the last known pose), ``"per_sequence"`` and ``"method_errors"``
+    (exceptions a method raised, counted as failed frames).
+    """
+    out: dict[str, Any] = {
+        "protocol": run.protocol,
+        "frames": int(sum(len(s.reference) for s in run.sequences)),
+        "sequences": [s.name for s in run.sequences],
+        "methods": {},
+    }
+    for name in run.methods:
+        per = [run.runs[(name, s.name)] for s in run.sequences]
+        est = np.concatenate([r.joints for r in per])
+        filled = np.concatenate([fill_forward(r.joints) for r in per])
+        ref = np.concatenate([s.reference.joints for s in run.sequences])
+        ref_angles = np.concatenate([s.reference.angles for s in run.sequences])
+        hits = sum(r.label_hits for r in per)
+        counted = sum(r.label_total for r in per)
+        seconds = sum(r.seconds for r in per)
+        errors = angle_errors(joint_angles(est), ref_angles)
+        row = {
+            "angle_error_deg": {k: _round(v) for k, v in errors.items()},
+            "mpjpe_mm": _round(mpjpe_mm(est, ref), 2),
+            "map_10cm": _round(map_at(est, ref, 0.10)),
+            "label_accuracy": _round(hits / counted) if counted else None,
+            "frames_per_second": _round(len(est) / seconds, 2) if seconds > 0 else None,
+            "failed_frames": int(np.count_nonzero(failed_frames(est))),
+            "filled": {
+                "angle_error_deg": {
+                    k: _round(v) for k, v in angle_errors(joint_angles(filled), ref_angles).items()
+                },
+                "mpjpe_mm": _round(mpjpe_mm(filled, ref), 2),
+                "map_10cm": _round(map_at(filled, ref, 0.10)),
+            },
+            "per_sequence": {
+                s.name: {
+                    "angle_error_mean_deg": _round(
+                        angle_errors(r.angles, s.reference.angles)["mean"]
+                    ),
+                    "mpjpe_mm": _round(mpjpe_mm(r.joints, s.reference.joints), 2),
+                    "failed_frames": int(np.count_nonzero(failed_frames(r.joints))),
+                }
+                for s, r in zip(run.sequences, per, strict=True)
+            },
+            "method_errors": sum(len(r.errors) for r in per),
+        }
+        out["methods"][name] = row
+    return out
+
+
+def evaluate(
+    sequences: Iterable[EvaluationSequence],
+    methods: Sequence[str] | Mapping[str, MethodFactory] = DEFAULT_METHODS,
+    *,
+    forest: Any = None,
+    progress: bool = True,
+    figures_dir: str | Path | None = None,
+    protocol: str | None = None,
+) -> dict:
+    """Evaluate methods on sequences: the JSON of ``posedrift eval`` (``METHOD.md`` section 6).
+
+    Parameters
+    ----------
+    sequences : iterable of EvaluationSequence
+    methods : sequence of str, or mapping of name -> factory
+        Default ``("cpd", "shotton", "pda", "icp")``; see :data:`METHODS`.
+    forest : BodyPartForest, optional
+        Shared by all methods (the default model, loaded once, when None).
+    progress : bool
+        Progress bar on standard error.
+    figures_dir : path, optional
+        Write the figures (Fig. 9, 6, 12 of the paper) there as PNG files.
+    protocol : str, optional
+        ``"synthetic"`` or ``"utd"`` (inferred by default).
+
+    Returns
+    -------
+    dict
+        ``{"protocol", "frames", "sequences", "methods": {name: {"angle_error_deg",
+        "mpjpe_mm", "map_10cm", "label_accuracy", "frames_per_second",
+        "failed_frames", ...}}}`` (see :func:`summarize`).
+    """
+    run = run_methods(sequences, methods, forest=forest, progress=progress, protocol=protocol)
+    report = summarize(run)
+    if figures_dir is not None:
+        from posedrift.evaluation._figures import write_figures
+
+        report["figures"] = [str(p) for p in write_figures(run, figures_dir)]
+    return report
+
+
+__all__ = [
+    "DEFAULT_METHODS",
+    "METHODS",
+    "EvaluationRun",
+    "MethodRun",
+    "SequenceRecord",
+    "evaluate",
+    "label_hits",
+    "make_method",
+    "parse_methods",
+    "run_methods",
+    "summarize",
+]

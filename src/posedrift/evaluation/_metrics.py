@@ -1,0 +1,176 @@
+"""Error metrics of the paper's Table 1 and of ITOP: angle errors, MPJPE, mAP@10cm.
+
+Conventions (``METHOD.md`` section 2): angles in degrees in ``ANGLE_NAMES`` order,
+joints in metres in ``JOINT_NAMES`` order. A frame where a method returned no pose
+(NaN joints) is a *failed* frame: it is left out of every error mean here and
+counted separately (:func:`failed_frames`); :func:`fill_forward` gives the
+alternative that fills it with the last known pose.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from posedrift.skeleton import ANGLE_NAMES, JOINT_NAMES
+
+
+def _check_same_shape(est: np.ndarray, ref: np.ndarray, shape: tuple, caller: str) -> None:
+    for name, arr in (("est", est), ("ref", ref)):
+        if arr.ndim != len(shape) or arr.shape[1:] != shape[1:]:
+            wanted = "(T, " + ", ".join(str(s) for s in shape[1:]) + ")"
+            raise ValueError(
+                f"The '{name}' argument of {caller} must have shape {wanted}. "
+                f"Got shape {arr.shape} instead."
+            )
+    if est.shape != ref.shape:
+        raise ValueError(
+            f"The 'est' and 'ref' arguments of {caller} must have the same number of frames. "
+            f"Got {est.shape[0]} and {ref.shape[0]}."
+        )
+
+
+def angle_errors(est_angles: np.ndarray, ref_angles: np.ndarray) -> dict[str, float | None]:
+    """Mean absolute angle error per angle (Eq. 2 of the paper) and their mean.
+
+    Parameters
+    ----------
+    est_angles, ref_angles : (T, 8) float
+        Degrees, in :data:`posedrift.skeleton.ANGLE_NAMES` order; NaN where unknown.
+
+    Returns
+    -------
+    errors : dict
+        ``{angle_name: degrees, ..., "mean": degrees}``. Each angle's error is the
+        mean of ``|est - ref|`` over the frames where both are known (None where
+        there is no such frame); ``"mean"`` is the mean of the eight per-angle
+        errors (of those that are known).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> est = np.full((2, 8), 90.0); ref = est.copy(); ref[0, 0] = 80.0
+    >>> angle_errors(est, ref)["left_elbow"], angle_errors(est, ref)["mean"]
+    (5.0, 0.625)
+    """
+    est = np.asarray(est_angles, dtype=float)
+    ref = np.asarray(ref_angles, dtype=float)
+    _check_same_shape(est, ref, (0, len(ANGLE_NAMES)), "angle_errors")
+    diff = np.abs(est - ref)
+    out: dict[str, float | None] = {}
+    known = []
+    for k, name in enumerate(ANGLE_NAMES):
+        d = diff[:, k]
+        d = d[np.isfinite(d)]
+        if d.size:
+            out[name] = float(d.mean())
+            known.append(out[name])
+        else:
+            out[name] = None
+    out["mean"] = float(np.mean(known)) if known else None
+    return out
+
+
+def joint_errors_m(est: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """Euclidean distance per frame and joint, ``(T, 15)`` metres, NaN where either is unknown."""
+    est = np.asarray(est, dtype=float)
+    ref = np.asarray(ref, dtype=float)
+    _check_same_shape(est, ref, (0, len(JOINT_NAMES), 3), "joint_errors_m")
+    return np.linalg.norm(est - ref, axis=-1)
+
+
+def mpjpe_mm(est: np.ndarray, ref: np.ndarray) -> float | None:
+    """Mean per-joint position error in millimetres.
+
+    Parameters
+    ----------
+    est, ref : (T, 15, 3) float
+        Joints in metres, the same frame and joint order; NaN where unknown.
+
+    Returns
+    -------
+    float or None
+        Mean Euclidean distance over all (frame, joint) pairs where both are
+        known, in millimetres; None if there is none.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ref = np.zeros((1, 15, 3)); est = ref.copy(); est[..., 0] = 0.01
+    >>> round(mpjpe_mm(est, ref), 6)
+    10.0
+    """
+    d = joint_errors_m(est, ref)
+    d = d[np.isfinite(d)]
+    return float(d.mean() * 1000.0) if d.size else None
+
+
+def map_at(est: np.ndarray, ref: np.ndarray, threshold: float = 0.10) -> float | None:
+    """Mean average precision at a distance threshold, as on ITOP.
+
+    For each joint, the share of frames (where both are known) whose estimate
+    lies within ``threshold`` metres of the reference; then the mean over joints.
+
+    Parameters
+    ----------
+    est, ref : (T, 15, 3) float
+        Joints in metres; NaN where unknown.
+    threshold : float
+        Metres (0.10 for mAP@10cm).
+
+    Returns
+    -------
+    float or None
+        In [0, 1]; None if no joint is known anywhere.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ref = np.zeros((2, 15, 3)); est = ref.copy(); est[0, :, 0] = 0.2
+    >>> map_at(est, ref)
+    0.5
+    """
+    if not threshold > 0:
+        raise ValueError(
+            f"The 'threshold' parameter of map_at must be a positive distance in metres. "
+            f"Got {threshold!r} instead."
+        )
+    d = joint_errors_m(est, ref)
+    known = np.isfinite(d)
+    per_joint = []
+    for j in range(d.shape[1]):
+        col = d[known[:, j], j]
+        if col.size:
+            per_joint.append(float(np.mean(col < threshold)))
+    return float(np.mean(per_joint)) if per_joint else None
+
+
+def failed_frames(est: np.ndarray) -> np.ndarray:
+    """``(T,)`` bool: frames whose joints are not all known (the method returned no pose)."""
+    est = np.asarray(est, dtype=float)
+    return ~np.isfinite(est.reshape(len(est), -1)).all(axis=1)
+
+
+def fill_forward(est: np.ndarray) -> np.ndarray:
+    """Replace each failed frame by the last known pose (frames before the first stay NaN).
+
+    Parameters
+    ----------
+    est : (T, ...) float
+        Per-frame values (joints ``(T, 15, 3)`` or angles ``(T, 8)``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> fill_forward(np.array([[np.nan], [1.0], [np.nan], [3.0]])).ravel().tolist()
+    [nan, 1.0, 1.0, 3.0]
+    """
+    out = np.array(est, dtype=float, copy=True)
+    bad = ~np.isfinite(out.reshape(len(out), -1)).all(axis=1)
+    last = None
+    for t in range(len(out)):
+        if bad[t]:
+            if last is not None:
+                out[t] = out[last]
+        else:
+            last = t
+    return out

@@ -1,0 +1,92 @@
+"""The evaluation report as a Markdown table in the layout of the paper's Table 1."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from posedrift.skeleton import ANGLE_NAMES
+
+PAPER_TABLE1: dict[str, tuple[float, ...]] = {
+    "Shotton et al. [9]": (9.24, 9.41, 9.12, 9.81, 9.91, 10.15, 10.34, 9.67, 9.70),
+    "Dinh et al. [15] (PDA)": (5.69, 5.63, 6.47, 6.88, 8.22, 8.73, 8.37, 6.84, 7.10),
+    "Kim et al. (CPD)": (5.54, 5.72, 5.32, 5.64, 8.02, 8.27, 6.40, 5.21, 6.26),
+}
+"""The paper's Table 1 (degrees; ``ANGLE_NAMES`` order, then the mean), on its own data."""
+
+_HEADERS = {
+    "left_elbow": "L elbow",
+    "right_elbow": "R elbow",
+    "left_shoulder": "L shoulder",
+    "right_shoulder": "R shoulder",
+    "left_knee": "L knee",
+    "right_knee": "R knee",
+    "left_hip": "L hip",
+    "right_hip": "R hip",
+}
+
+
+def _fmt(value: float | None, digits: int = 2) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+def markdown_table(report: Mapping, *, paper: bool = True) -> str:
+    """Table 1 of the paper for one evaluation (the JSON of ``posedrift eval``).
+
+    Rows are the methods; columns the eight mean absolute angle errors (degrees,
+    the paper's order), their mean, then MPJPE (mm), mAP@10cm, frames per second
+    and failed frames.
+
+    Parameters
+    ----------
+    report : mapping
+        As returned by :func:`posedrift.evaluation.evaluate`.
+    paper : bool
+        Also list the paper's three rows below a separator, marked as measured on
+        the paper's own data (they are not comparable frame for frame).
+
+    Returns
+    -------
+    str
+        Markdown, ending with a newline.
+
+    Examples
+    --------
+    >>> row = {"angle_error_deg": dict.fromkeys(
+    ...     ("left_elbow", "right_elbow", "left_shoulder", "right_shoulder", "left_knee",
+    ...      "right_knee", "left_hip", "right_hip", "mean"), 1.0),
+    ...     "mpjpe_mm": 50.0, "map_10cm": 0.9, "label_accuracy": None,
+    ...     "frames_per_second": 10.0, "failed_frames": 0}
+    >>> print(markdown_table({"protocol": "synthetic", "frames": 3, "sequences": ["a"],
+    ...                       "methods": {"cpd": row}}, paper=False).splitlines()[2][:39])
+    | cpd | 1.00 | 1.00 | 1.00 | 1.00 | 1.0
+    """
+    headers = (
+        ["Method"]
+        + [_HEADERS[a] for a in ANGLE_NAMES]
+        + ["Mean", "MPJPE (mm)", "mAP@10cm", "fps", "failed"]
+    )
+    lines = [
+        "| " + " | ".join(headers) + " |",
+        "|" + "|".join(["---"] + ["---:"] * (len(headers) - 1)) + "|",
+    ]
+    for name, row in report["methods"].items():
+        errors = row["angle_error_deg"]
+        cells = [name] + [_fmt(errors.get(a)) for a in ANGLE_NAMES]
+        cells.append(f"**{_fmt(errors.get('mean'))}**")
+        cells.append(_fmt(row.get("mpjpe_mm"), 1))
+        cells.append(_fmt(row.get("map_10cm"), 3))
+        cells.append(_fmt(row.get("frames_per_second"), 1))
+        cells.append(str(row.get("failed_frames", "-")))
+        lines.append("| " + " | ".join(cells) + " |")
+    if paper:
+        for name, values in PAPER_TABLE1.items():
+            cells = [f"*paper: {name}*"] + [f"{v:.2f}" for v in values[:-1]]
+            cells += [f"*{values[-1]:.2f}*", "-", "-", "-", "-"]
+            lines.append("| " + " | ".join(cells) + " |")
+    text = "\n".join(lines) + "\n"
+    if paper:
+        text += (
+            "\nRows marked *paper* are the paper's Table 1, measured on its own synthetic data "
+            "(not available); they are not comparable frame for frame with the rows above.\n"
+        )
+    return text

@@ -1,0 +1,614 @@
+"""The body-part forest: a per-pixel random forest over depth-comparison features.
+
+The model is plain arrays (no pickled objects): split feature ids into a bank of
+offset pairs, float32 thresholds, int32 children and per-leaf part distributions.
+Inference classifies every foreground pixel of a frame together, level by level:
+each pixel computes only the one feature its current node asks for.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+from dataclasses import dataclass, field
+from importlib import resources
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from posedrift.camera import Intrinsics
+from posedrift.labelling._features import (
+    BACKGROUND_DEPTH,
+    REFERENCE_FOCAL,
+    pair_features,
+    pixel_terms,
+    probe_image,
+    scaled_offsets,
+)
+from posedrift.skeleton import PART_NAMES
+
+FORMAT_NAME = "posedrift-body-part-forest"
+FORMAT_VERSION = 1
+MAX_DEPTH = 64
+"""Deepest tree a model file may hold (bounds the level-by-level loop)."""
+MAX_OFFSET = 5000.0
+"""Largest offset (pixel x metres) a model file may hold."""
+
+_DEFAULT_MODEL = "forest_default.npz"
+_KEYS = (
+    "format",
+    "version",
+    "part_names",
+    "metadata",
+    "reference_focal",
+    "background",
+    "offsets",
+    "roots",
+    "feature",
+    "threshold",
+    "left",
+    "right",
+    "leaf",
+    "leaf_values",
+)
+
+
+@dataclass(frozen=True)
+class PartPrediction:
+    """Per-pixel body-part labels of one frame.
+
+    Parameters
+    ----------
+    labels : (H, W) int16
+        Part index (``skeleton.PART_NAMES`` order) of each foreground pixel, -1 elsewhere.
+    pixels : (N, 2) intp
+        ``(row, column)`` of the classified pixels, row-major order.
+    probabilities : (N, 15) float32
+        ``P(part | pixel)``, averaged over the trees; each row sums to 1.
+    """
+
+    labels: np.ndarray
+    pixels: np.ndarray
+    probabilities: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class BodyPartForest:
+    """A random forest that labels depth pixels with the 15 body parts.
+
+    Nodes of all trees share one set of arrays; ``roots[t]`` is tree ``t``'s root.
+    An internal node ``i`` sends a pixel to ``left[i]`` when its feature
+    ``offsets[feature[i]]`` is ``<= threshold[i]``, else to ``right[i]``; a leaf has
+    ``feature == left == right == -1`` and its distribution in ``leaf_values[leaf[i]]``.
+
+    Parameters
+    ----------
+    offsets : (K, 4) float32
+        Offset pairs ``(u_row, u_col, v_row, v_col)`` in pixel x metres at ``reference_focal``.
+    roots : (T,) int32
+    feature, left, right, leaf : (M,) int32
+    threshold : (M,) float32
+        Depth differences in metres.
+    leaf_values : (L, 15) float32
+        Part distributions of the leaves (rows sum to 1).
+    reference_focal : float
+        Focal length (pixels) of the offsets.
+    background : float
+        Depth (metres) read by background and off-image probes.
+    metadata : dict
+        JSON-serialisable facts about training (seed, frames, ...).
+
+    Examples
+    --------
+    >>> forest = BodyPartForest.load_default()
+    >>> forest.n_trees, forest.n_parts
+    (3, 15)
+    """
+
+    offsets: np.ndarray
+    roots: np.ndarray
+    feature: np.ndarray
+    threshold: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    leaf: np.ndarray
+    leaf_values: np.ndarray
+    reference_focal: float = REFERENCE_FOCAL
+    background: float = BACKGROUND_DEPTH
+    metadata: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        arrays = _validate_arrays(
+            {
+                "offsets": self.offsets,
+                "roots": self.roots,
+                "feature": self.feature,
+                "threshold": self.threshold,
+                "left": self.left,
+                "right": self.right,
+                "leaf": self.leaf,
+                "leaf_values": self.leaf_values,
+            },
+            float(self.reference_focal),
+            float(self.background),
+            "BodyPartForest",
+        )
+        for name, value in arrays.items():
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "reference_focal", float(self.reference_focal))
+        object.__setattr__(self, "background", float(self.background))
+        object.__setattr__(self, "metadata", dict(self.metadata))
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def n_trees(self) -> int:
+        """Number of trees."""
+        return len(self.roots)
+
+    @property
+    def n_parts(self) -> int:
+        """Number of body parts (15)."""
+        return self.leaf_values.shape[1]
+
+    @property
+    def n_nodes(self) -> int:
+        """Number of nodes over all trees."""
+        return len(self.feature)
+
+    # ------------------------------------------------------------------ building
+    @classmethod
+    def from_sklearn(
+        cls,
+        estimator: Any,
+        offsets: np.ndarray,
+        *,
+        reference_focal: float = REFERENCE_FOCAL,
+        background: float = BACKGROUND_DEPTH,
+        metadata: dict | None = None,
+    ) -> BodyPartForest:
+        """Export a fitted scikit-learn forest (or single tree) to arrays.
+
+        Parameters
+        ----------
+        estimator : RandomForestClassifier, ExtraTreesClassifier or DecisionTreeClassifier
+            Fitted on a feature matrix whose column ``k`` is offset pair ``offsets[k]``
+            and whose classes are part indices in ``0..14``.
+        offsets : (K, 4) float
+            The offset bank, in the columns' order.
+
+        Returns
+        -------
+        BodyPartForest
+            Routes every feature vector to the same leaves as ``estimator`` does;
+            its probabilities equal ``estimator.predict_proba`` up to float32 rounding.
+        """
+        if not hasattr(estimator, "classes_"):
+            raise ValueError("The 'estimator' of BodyPartForest.from_sklearn must be fitted.")
+        trees = getattr(estimator, "estimators_", [estimator])
+        classes = np.asarray(estimator.classes_)
+        n_parts = len(PART_NAMES)
+        if (
+            not np.issubdtype(classes.dtype, np.integer)
+            or classes.min() < 0
+            or classes.max() >= n_parts
+        ):
+            raise ValueError(
+                f"The 'estimator' of BodyPartForest.from_sklearn must be fitted on part "
+                f"indices 0..{n_parts - 1}. Got classes {classes.tolist()}."
+            )
+        offsets = np.asarray(offsets, dtype=np.float32)
+        roots, features, thresholds, lefts, rights, leaves, values = [], [], [], [], [], [], []
+        base = 0
+        n_leaves = 0
+        for tree in trees:
+            t = tree.tree_
+            left = t.children_left.astype(np.int64)
+            right = t.children_right.astype(np.int64)
+            is_leaf = left < 0
+            feature = np.where(is_leaf, -1, t.feature).astype(np.int32)
+            threshold = np.where(is_leaf, 0.0, t.threshold)
+            value = t.value[:, 0, :].astype(np.float64)
+            leaf = np.full(t.node_count, -1, dtype=np.int64)
+            leaf[is_leaf] = n_leaves + np.arange(np.count_nonzero(is_leaf))
+            dist = np.zeros((np.count_nonzero(is_leaf), n_parts))
+            dist[:, classes] = value[is_leaf]
+            dist /= dist.sum(axis=1, keepdims=True)
+            roots.append(base)
+            features.append(feature)
+            thresholds.append(_floor_float32(threshold))
+            lefts.append(np.where(is_leaf, -1, left + base))
+            rights.append(np.where(is_leaf, -1, right + base))
+            leaves.append(leaf)
+            values.append(dist)
+            base += t.node_count
+            n_leaves += len(dist)
+        if offsets.ndim != 2 or int(max(f.max() for f in features)) >= len(offsets):
+            raise ValueError(
+                f"The 'offsets' of BodyPartForest.from_sklearn must have a row per feature "
+                f"column of the estimator. Got shape {offsets.shape}."
+            )
+        return cls(
+            offsets=offsets,
+            roots=np.asarray(roots, dtype=np.int32),
+            feature=np.concatenate(features).astype(np.int32),
+            threshold=np.concatenate(thresholds),
+            left=np.concatenate(lefts).astype(np.int32),
+            right=np.concatenate(rights).astype(np.int32),
+            leaf=np.concatenate(leaves).astype(np.int32),
+            leaf_values=np.concatenate(values).astype(np.float32),
+            reference_focal=reference_focal,
+            background=background,
+            metadata=metadata or {},
+        )
+
+    # ------------------------------------------------------------------ files
+    def save(self, path: str | PathLike) -> Path:
+        """Write the model to ``path`` (a compressed ``.npz`` of plain arrays).
+
+        Leaf distributions are stored as float16; nothing is pickled.
+        """
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "wb") as handle:
+            np.savez_compressed(
+                handle,
+                format=np.array(FORMAT_NAME),
+                version=np.array(FORMAT_VERSION, dtype=np.int32),
+                part_names=np.array(PART_NAMES),
+                metadata=np.array(json.dumps(self.metadata, sort_keys=True)),
+                reference_focal=np.array(self.reference_focal),
+                background=np.array(self.background),
+                offsets=self.offsets,
+                roots=self.roots,
+                feature=self.feature,
+                threshold=self.threshold,
+                left=self.left,
+                right=self.right,
+                leaf=self.leaf,
+                leaf_values=self.leaf_values.astype(np.float16),
+            )
+        return path
+
+    @classmethod
+    def load(cls, path: str | PathLike) -> BodyPartForest:
+        """Read a model written by :meth:`save`, checking every array; never unpickles.
+
+        Raises
+        ------
+        ValueError
+            If the file is not a posedrift forest, has another format version, is
+            truncated or corrupt, or holds arrays of the wrong shape, dtype or range
+            (children or feature ids out of range, cycles, non-finite values).
+        """
+        path = Path(path)
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise ValueError(f"Cannot read the forest model file {path}: {exc}.") from exc
+        return cls._from_bytes(data, str(path))
+
+    @classmethod
+    def load_default(cls) -> BodyPartForest:
+        """The model shipped with posedrift (trained by ``posedrift train``)."""
+        resource = resources.files("posedrift").joinpath("data", _DEFAULT_MODEL)
+        try:
+            data = resource.read_bytes()
+        except (FileNotFoundError, OSError) as exc:
+            raise ValueError(
+                f"The default forest model {_DEFAULT_MODEL} is missing from the posedrift "
+                f"package; train one with 'posedrift train --out MODEL'."
+            ) from exc
+        return cls._from_bytes(data, f"posedrift/data/{_DEFAULT_MODEL}")
+
+    @classmethod
+    def _from_bytes(cls, data: bytes, where: str) -> BodyPartForest:
+        prefix = f"The forest model file {where}"
+        try:
+            with np.load(io.BytesIO(data), allow_pickle=False) as npz:
+                missing = [k for k in _KEYS if k not in npz.files]
+                if "format" in npz.files and "version" in npz.files:
+                    fmt = _scalar_text(npz["format"])
+                    if fmt != FORMAT_NAME:
+                        raise ValueError(f"{prefix} is not a posedrift forest (format {fmt!r}).")
+                    version = npz["version"]
+                    if version.shape != () or not np.issubdtype(version.dtype, np.integer):
+                        raise ValueError(f"{prefix} has an unreadable format version.")
+                    if int(version) != FORMAT_VERSION:
+                        raise ValueError(
+                            f"{prefix} has format version {int(version)}; this posedrift reads "
+                            f"version {FORMAT_VERSION}. Retrain it with 'posedrift train'."
+                        )
+                if missing:
+                    raise ValueError(f"{prefix} is not a posedrift forest: missing {missing}.")
+                arrays = {k: npz[k] for k in _KEYS}
+        except ValueError as exc:
+            if str(exc).startswith(prefix):
+                raise
+            raise ValueError(f"{prefix} cannot be read safely: {exc}") from exc
+        except (OSError, EOFError, KeyError, zipfile.BadZipFile) as exc:
+            raise ValueError(f"{prefix} is truncated or corrupt: {exc}") from exc
+        parts = arrays["part_names"]
+        if parts.dtype.kind != "U" or tuple(parts.tolist()) != PART_NAMES:
+            raise ValueError(f"{prefix} was trained for other body parts: {parts.tolist()!r}.")
+        try:
+            metadata = json.loads(_scalar_text(arrays["metadata"]))
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{prefix} has unreadable metadata: {exc}") from exc
+        if not isinstance(metadata, dict):
+            raise ValueError(f"{prefix} has unreadable metadata (not an object).")
+        scalars = {}
+        for name in ("reference_focal", "background"):
+            value = arrays[name]
+            if value.shape != () or value.dtype.kind != "f":
+                raise ValueError(f"{prefix} has a malformed '{name}' ({value.dtype}, {value.shape}).")
+            scalars[name] = float(value)
+        leaf_values = arrays["leaf_values"]
+        if leaf_values.dtype not in (np.float16, np.float32):
+            raise ValueError(
+                f"{prefix} has 'leaf_values' of dtype {leaf_values.dtype}; expected float16/32."
+            )
+        arrays["leaf_values"] = leaf_values.astype(np.float32)
+        try:
+            return cls(
+                **{k: arrays[k] for k in _KEYS[6:]},
+                reference_focal=scalars["reference_focal"],
+                background=scalars["background"],
+                metadata=metadata,
+            )
+        except ValueError as exc:
+            raise ValueError(f"{prefix} is invalid: {exc}") from exc
+
+    # ------------------------------------------------------------------ inference
+    def predict(
+        self, depth: np.ndarray, mask: np.ndarray | None, intrinsics: Intrinsics
+    ) -> PartPrediction:
+        """Label every foreground pixel of a depth frame with a body part.
+
+        Parameters
+        ----------
+        depth : (H, W) float
+            Depth in metres (0 or NaN: no measurement).
+        mask : (H, W) bool or None
+            The person's pixels (the tracker's segmentation); ``None`` takes every
+            pixel with depth. Pixels without depth are never labelled.
+        intrinsics : Intrinsics
+            The camera; offsets scale by its focal length over ``reference_focal``.
+
+        Returns
+        -------
+        PartPrediction
+            An all ``-1`` label map and empty arrays when there is no foreground.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from posedrift.camera import camera_preset
+        >>> cam = camera_preset("kinect1-qvga")
+        >>> pred = BodyPartForest.load_default().predict(np.zeros((240, 320)), None, cam)
+        >>> pred.labels.shape, pred.probabilities.shape
+        ((240, 320), (0, 15))
+        """
+        depth = np.asarray(depth)
+        if not isinstance(intrinsics, Intrinsics):
+            raise ValueError(
+                f"The 'intrinsics' argument of BodyPartForest.predict must be an Intrinsics. "
+                f"Got {type(intrinsics).__name__} instead."
+            )
+        if depth.ndim != 2 or depth.shape != intrinsics.shape:
+            raise ValueError(
+                f"The 'depth' argument of BodyPartForest.predict must be an image of shape "
+                f"{intrinsics.shape} (the intrinsics'). Got shape {depth.shape} instead."
+            )
+        if not np.issubdtype(depth.dtype, np.number):
+            raise ValueError(
+                f"The 'depth' argument of BodyPartForest.predict must hold numbers. "
+                f"Got dtype {depth.dtype} instead."
+            )
+        depth = depth.astype(np.float32, copy=False)
+        with np.errstate(invalid="ignore"):
+            valid = np.isfinite(depth) & (depth > 0)
+        if mask is not None:
+            mask = np.asarray(mask)
+            if mask.shape != depth.shape:
+                raise ValueError(
+                    f"The 'mask' argument of BodyPartForest.predict must have the depth's "
+                    f"shape {depth.shape}. Got shape {mask.shape} instead."
+                )
+            valid &= mask.astype(bool, copy=False)
+        rows, cols = np.nonzero(valid)
+        pixels = np.column_stack([rows, cols]).astype(np.intp)
+        labels = np.full(depth.shape, -1, dtype=np.int16)
+        if len(pixels) == 0:
+            return PartPrediction(
+                labels=labels,
+                pixels=pixels,
+                probabilities=np.zeros((0, self.n_parts), dtype=np.float32),
+            )
+        image = probe_image(depth, valid, self.background)
+        r, c, inv = pixel_terms(depth, pixels)
+        offsets = scaled_offsets(self.offsets, intrinsics, self.reference_focal)
+
+        def features(active: np.ndarray, feature_ids: np.ndarray) -> np.ndarray:
+            return pair_features(
+                image, depth.shape, r[active], c[active], inv[active], offsets[feature_ids]
+            )
+
+        probabilities = self._proba(len(pixels), features)
+        labels[rows, cols] = np.argmax(probabilities, axis=1)
+        return PartPrediction(labels=labels, pixels=pixels, probabilities=probabilities)
+
+    def predict_proba_features(self, features: np.ndarray) -> np.ndarray:
+        """Part probabilities ``(N, 15)`` float32 from a precomputed feature matrix.
+
+        Parameters
+        ----------
+        features : (N, K) float
+            Column ``k`` is offset pair ``k`` (as in training).
+        """
+        x = np.asarray(features, dtype=np.float32)
+        if x.ndim != 2 or x.shape[1] != len(self.offsets):
+            raise ValueError(
+                f"The 'features' argument must be an (N, {len(self.offsets)}) matrix. "
+                f"Got shape {x.shape} instead."
+            )
+        return self._proba(len(x), lambda active, ids: x[active, ids])
+
+    def apply_features(self, features: np.ndarray) -> np.ndarray:
+        """Leaf node reached in each tree, ``(N, T)`` int32 (global node ids)."""
+        x = np.asarray(features, dtype=np.float32)
+        return self._leaves(len(x), lambda active, ids: x[active, ids]).T.copy()
+
+    def _leaves(self, n: int, features: Any) -> np.ndarray:
+        """Level-by-level descent of ``n`` samples through every tree: ``(T, n)`` leaf ids."""
+        n_trees = self.n_trees
+        reached = np.empty(n_trees * n, dtype=np.int32)
+        slot = np.arange(n_trees * n, dtype=np.intp)
+        sample = np.tile(np.arange(n, dtype=np.intp), n_trees)
+        node = np.repeat(self.roots.astype(np.intp), n)
+        for _ in range(MAX_DEPTH + 1):
+            ids = self.feature[node]
+            at_leaf = ids < 0
+            if at_leaf.any():
+                reached[slot[at_leaf]] = node[at_leaf]
+                keep = ~at_leaf
+                slot, sample, node, ids = slot[keep], sample[keep], node[keep], ids[keep]
+            if len(node) == 0:
+                break
+            go_left = features(sample, ids) <= self.threshold[node]
+            node = np.where(go_left, self.left[node], self.right[node])
+        return reached.reshape(n_trees, n)
+
+    def _proba(self, n: int, features: Any) -> np.ndarray:
+        reached = self._leaves(n, features)
+        total = self.leaf_values[self.leaf[reached[0]]].copy()
+        for t in range(1, self.n_trees):
+            total += self.leaf_values[self.leaf[reached[t]]]
+        total /= np.float32(self.n_trees)
+        return total
+
+
+def _scalar_text(value: np.ndarray) -> str:
+    if value.shape != () or value.dtype.kind != "U":
+        raise ValueError(f"expected a text scalar, got {value.dtype} of shape {value.shape}")
+    return str(value)
+
+
+def _floor_float32(threshold: np.ndarray) -> np.ndarray:
+    """Largest float32 ``<= threshold``: ``x <= t`` then holds for float32 ``x`` exactly."""
+    t32 = threshold.astype(np.float32)
+    above = t32.astype(np.float64) > threshold
+    t32[above] = np.nextafter(t32[above], np.float32(-np.inf))
+    return t32
+
+
+def _validate_arrays(
+    arrays: dict[str, Any], reference_focal: float, background: float, caller: str
+) -> dict[str, np.ndarray]:
+    """Check dtypes, shapes, ranges and the tree structure; return contiguous copies."""
+
+    def typed(name: str, kinds: str, ndim: int) -> np.ndarray:
+        value = np.asarray(arrays[name])
+        if value.dtype.kind not in kinds or value.ndim != ndim:
+            raise ValueError(
+                f"The '{name}' array of {caller} must be a {ndim}-D "
+                f"{'integer' if kinds == 'iu' else 'float'} array. "
+                f"Got dtype {value.dtype}, shape {value.shape}."
+            )
+        return value
+
+    if not (np.isfinite(reference_focal) and reference_focal > 0):
+        raise ValueError(
+            f"The 'reference_focal' of {caller} must be a positive focal length in pixels. "
+            f"Got {reference_focal!r}."
+        )
+    if not (np.isfinite(background) and background > 0):
+        raise ValueError(
+            f"The 'background' of {caller} must be a positive depth in metres. Got {background!r}."
+        )
+    offsets = typed("offsets", "f", 2)
+    if offsets.shape[1] != 4 or len(offsets) == 0:
+        raise ValueError(f"The 'offsets' array of {caller} must be (K, 4). Got {offsets.shape}.")
+    if not np.all(np.isfinite(offsets)) or np.abs(offsets).max() > MAX_OFFSET:
+        raise ValueError(
+            f"The 'offsets' array of {caller} must be finite and within +-{MAX_OFFSET:g} "
+            f"pixel x metres."
+        )
+    roots = typed("roots", "iu", 1)
+    feature = typed("feature", "iu", 1)
+    threshold = typed("threshold", "f", 1)
+    left = typed("left", "iu", 1)
+    right = typed("right", "iu", 1)
+    leaf = typed("leaf", "iu", 1)
+    leaf_values = typed("leaf_values", "f", 2)
+    n_nodes = len(feature)
+    for name, value in (("threshold", threshold), ("left", left), ("right", right), ("leaf", leaf)):
+        if len(value) != n_nodes:
+            raise ValueError(
+                f"The '{name}' array of {caller} must have one entry per node ({n_nodes}). "
+                f"Got {len(value)}."
+            )
+    if n_nodes == 0 or len(roots) == 0:
+        raise ValueError(f"A {caller} needs at least one tree. Got {len(roots)} roots.")
+    if leaf_values.shape[1] != len(PART_NAMES) or len(leaf_values) == 0:
+        raise ValueError(
+            f"The 'leaf_values' array of {caller} must be (L, {len(PART_NAMES)}). "
+            f"Got {leaf_values.shape}."
+        )
+    if (
+        not np.all(np.isfinite(leaf_values))
+        or leaf_values.min() < 0
+        or not np.allclose(leaf_values.sum(axis=1), 1.0, atol=1e-2)
+    ):
+        raise ValueError(
+            f"The 'leaf_values' of {caller} must be probability distributions (finite, "
+            f"non-negative, rows summing to 1)."
+        )
+    if not np.all(np.isfinite(threshold)):
+        raise ValueError(f"The 'threshold' array of {caller} must be finite.")
+    if roots.min() < 0 or roots.max() >= n_nodes:
+        raise ValueError(f"The 'roots' of {caller} must index nodes in [0, {n_nodes}).")
+    is_leaf = feature < 0
+    index = np.arange(n_nodes)
+    if np.any(feature >= len(offsets)) or np.any(feature < -1):
+        raise ValueError(
+            f"The 'feature' ids of {caller} must be -1 (leaf) or in [0, {len(offsets)})."
+        )
+    internal = ~is_leaf
+    if np.any(left[is_leaf] != -1) or np.any(right[is_leaf] != -1):
+        raise ValueError(f"The leaves of {caller} must have children -1.")
+    for name, child in (("left", left), ("right", right)):
+        c = child[internal].astype(np.int64)
+        if np.any(c <= index[internal]) or np.any(c >= n_nodes):
+            raise ValueError(
+                f"The '{name}' child indices of {caller} must lie in (node, {n_nodes}) "
+                f"(children after their parent; no cycles)."
+            )
+    if np.any(leaf[internal] != -1) or np.any(leaf[is_leaf] < 0) or (
+        np.any(leaf[is_leaf] >= len(leaf_values))
+    ):
+        raise ValueError(
+            f"The 'leaf' indices of {caller} must be -1 for internal nodes and in "
+            f"[0, {len(leaf_values)}) for leaves."
+        )
+    frontier = np.unique(roots.astype(np.int64))
+    for _ in range(MAX_DEPTH + 1):
+        frontier = frontier[internal[frontier]]
+        if len(frontier) == 0:
+            break
+        frontier = np.unique(np.concatenate([left[frontier], right[frontier]]).astype(np.int64))
+    else:
+        raise ValueError(f"The trees of {caller} are deeper than {MAX_DEPTH} levels.")
+    return {
+        "offsets": np.ascontiguousarray(offsets, dtype=np.float32),
+        "roots": np.ascontiguousarray(roots, dtype=np.int32),
+        "feature": np.ascontiguousarray(feature, dtype=np.int32),
+        "threshold": np.ascontiguousarray(threshold, dtype=np.float32),
+        "left": np.ascontiguousarray(left, dtype=np.int32),
+        "right": np.ascontiguousarray(right, dtype=np.int32),
+        "leaf": np.ascontiguousarray(leaf, dtype=np.int32),
+        "leaf_values": np.ascontiguousarray(leaf_values, dtype=np.float32),
+    }

@@ -1,0 +1,692 @@
+"""Training the body-part forest: offset bank, pixel sampling, fitting, export.
+
+scikit-learn (the ``train`` extra) is imported only inside :func:`train_forest`;
+loading and inference need NumPy alone.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from posedrift._validation import check_rng, check_scalar
+from posedrift.camera import Intrinsics
+from posedrift.labelling._features import BACKGROUND_DEPTH, REFERENCE_FOCAL, feature_matrix
+from posedrift.labelling._forest import BodyPartForest
+from posedrift.skeleton import PART_COLOURS, PART_NAMES
+
+MAX_OFFSET = 1.3 * REFERENCE_FOCAL
+"""Largest offset in pixel x metres: probes reach about 1.3 m around a pixel."""
+
+
+@dataclass(frozen=True)
+class LabelledFrame:
+    """A depth frame with its true part labels, for training and evaluation.
+
+    Parameters
+    ----------
+    depth : (H, W) float32
+        Depth in metres, 0 where nothing was measured.
+    labels : (H, W) uint8
+        Part index + 1, 0 for background.
+    intrinsics : Intrinsics
+    """
+
+    depth: np.ndarray
+    labels: np.ndarray
+    intrinsics: Intrinsics
+
+    @property
+    def mask(self) -> np.ndarray:
+        """Foreground: labelled pixels with a depth measurement."""
+        return (self.labels > 0) & (self.depth > 0)
+
+
+def offset_bank(
+    n_offsets: int,
+    *,
+    max_offset: float = MAX_OFFSET,
+    unary_fraction: float = 0.25,
+    rng: int | np.random.Generator | None = None,
+) -> np.ndarray:
+    """Random candidate offset pairs ``(u_row, u_col, v_row, v_col)`` in pixel x metres.
+
+    Each offset's length is uniform in ``[0, max_offset]`` and its direction uniform,
+    so short offsets (fine detail) are as common as long ones (context). A fraction
+    ``unary_fraction`` of pairs has ``v = 0``: they compare a probe with the pixel
+    itself.
+
+    Returns
+    -------
+    offsets : (n_offsets, 4) float32
+    """
+    n_offsets = check_scalar(n_offsets, "n_offsets", low=1, include_low=True, integer=True)
+    rng = check_rng(rng)
+
+    def draw(n: int) -> np.ndarray:
+        length = max_offset * rng.uniform(0.0, 1.0, n)
+        angle = rng.uniform(0.0, 2.0 * np.pi, n)
+        return np.column_stack([length * np.sin(angle), length * np.cos(angle)])
+
+    u = draw(n_offsets)
+    v = draw(n_offsets)
+    v[rng.uniform(size=n_offsets) < unary_fraction] = 0.0
+    return np.hstack([u, v]).astype(np.float32)
+
+
+def sample_pixels(
+    labels: np.ndarray,
+    mask: np.ndarray,
+    n_pixels: int,
+    *,
+    balance: float = 0.5,
+    rng: int | np.random.Generator | None = None,
+) -> np.ndarray:
+    """Foreground pixels drawn without replacement, favouring small parts.
+
+    A pixel of part ``p`` is drawn with weight ``count(p) ** -balance``: 0 samples
+    uniformly, 1 gives every part the same share (hands and feet as often as the torso).
+
+    Returns
+    -------
+    pixels : (min(n_pixels, N_fg), 2) intp
+        ``(row, column)``.
+    """
+    rng = check_rng(rng)
+    rows, cols = np.nonzero(mask)
+    if len(rows) == 0:
+        return np.zeros((0, 2), dtype=np.intp)
+    part = labels[rows, cols].astype(np.intp)
+    counts = np.bincount(part, minlength=256).astype(float)
+    weight = counts[part] ** -float(balance)
+    weight /= weight.sum()
+    take = min(int(n_pixels), len(rows))
+    chosen = rng.choice(len(rows), size=take, replace=False, p=weight)
+    chosen.sort()
+    return np.column_stack([rows[chosen], cols[chosen]]).astype(np.intp)
+
+
+def train_forest(
+    frames: Iterable[LabelledFrame],
+    *,
+    n_frames: int,
+    offsets: np.ndarray | None = None,
+    n_offsets: int = 600,
+    pixels_per_frame: int = 2000,
+    balance: float = 0.5,
+    n_trees: int = 3,
+    max_depth: int = 20,
+    min_samples_leaf: int = 5,
+    max_features: float | str = "sqrt",
+    extra_trees: bool = False,
+    n_jobs: int = 2,
+    reference_focal: float = REFERENCE_FOCAL,
+    background: float = BACKGROUND_DEPTH,
+    rng: int | np.random.Generator | None = None,
+    on_frame: Callable[[int], None] | None = None,
+    on_stage: Callable[[str], None] | None = None,
+    metadata: dict | None = None,
+) -> BodyPartForest:
+    """Fit a body-part forest on labelled depth frames.
+
+    Parameters
+    ----------
+    frames : iterable of LabelledFrame
+        Consumed once; at most ``n_frames`` are used (their features are kept, the
+        frames are not).
+    n_frames : int
+        Number of frames (sizes the feature matrix up front).
+    offsets : (K, 4) float, optional
+        The candidate offset bank; default :func:`offset_bank` of ``n_offsets``.
+    pixels_per_frame : int
+        Pixels sampled per frame (:func:`sample_pixels` with ``balance``).
+    n_trees, max_depth, min_samples_leaf, max_features :
+        Forest settings (scikit-learn's meanings).
+    extra_trees : bool
+        ExtraTreesClassifier (random thresholds, faster) instead of a random forest.
+    n_jobs : int
+        Threads for fitting.
+    rng : int, Generator or None
+        Seeds the offsets, the pixel sampling and the forest.
+    on_frame, on_stage : callable, optional
+        Progress callbacks: called with the frame index after each frame, and with a
+        stage name (``"fit"``) before fitting.
+    metadata : dict, optional
+        Stored with the model (how it was trained).
+
+    Returns
+    -------
+    BodyPartForest
+
+    Raises
+    ------
+    ValueError
+        If no frame holds a labelled pixel.
+    """
+    from sklearn.ensemble import ExtraTreesClassifier, RandomForestClassifier
+
+    n_frames = check_scalar(n_frames, "n_frames", low=1, include_low=True, integer=True)
+    rng = check_rng(rng)
+    if offsets is None:
+        offsets = offset_bank(n_offsets, rng=rng)
+    offsets = np.asarray(offsets, dtype=np.float32)
+    capacity = n_frames * pixels_per_frame
+    x = np.empty((capacity, len(offsets)), dtype=np.float32)
+    y = np.empty(capacity, dtype=np.int16)
+    filled = 0
+    started = time.perf_counter()
+    for i, frame in enumerate(frames):
+        if i >= n_frames:
+            break
+        mask = frame.mask
+        pixels = sample_pixels(frame.labels, mask, pixels_per_frame, balance=balance, rng=rng)
+        n = len(pixels)
+        if n:
+            feature_matrix(
+                frame.depth,
+                mask,
+                pixels,
+                offsets,
+                frame.intrinsics,
+                reference_focal=reference_focal,
+                background=background,
+                out=x[filled : filled + n],
+            )
+            y[filled : filled + n] = frame.labels[pixels[:, 0], pixels[:, 1]].astype(np.int16) - 1
+            filled += n
+        if on_frame is not None:
+            on_frame(i)
+    if filled == 0:
+        raise ValueError("train_forest got no labelled foreground pixel in its frames.")
+    data_seconds = time.perf_counter() - started
+    x = x[:filled]
+    y = y[:filled]
+    if on_stage is not None:
+        on_stage("fit")
+    cls = ExtraTreesClassifier if extra_trees else RandomForestClassifier
+    seed = int(rng.integers(2**31 - 1))
+    estimator = cls(
+        n_estimators=n_trees,
+        max_depth=max_depth,
+        min_samples_leaf=min_samples_leaf,
+        max_features=max_features,
+        n_jobs=n_jobs,
+        random_state=seed,
+    )
+    started = time.perf_counter()
+    estimator.fit(x, y)
+    fit_seconds = time.perf_counter() - started
+    info = dict(metadata or {})
+    info.update(
+        {
+            "samples": int(filled),
+            "offsets": len(offsets),
+            "trees": n_trees,
+            "max_depth": max_depth,
+            "min_samples_leaf": min_samples_leaf,
+            "max_features": max_features,
+            "estimator": cls.__name__,
+            "pixels_per_frame": pixels_per_frame,
+            "balance": balance,
+            "data_seconds": round(data_seconds, 1),
+            "fit_seconds": round(fit_seconds, 1),
+            "parts": list(PART_NAMES),
+        }
+    )
+    return BodyPartForest.from_sklearn(
+        estimator,
+        offsets,
+        reference_focal=reference_focal,
+        background=background,
+        metadata=info,
+    )
+
+
+def label_accuracy(
+    forest: BodyPartForest, frames: Sequence[LabelledFrame]
+) -> tuple[float, np.ndarray, np.ndarray]:
+    """Per-pixel accuracy of ``forest`` on labelled frames.
+
+    Returns
+    -------
+    accuracy : float
+        Share of foreground pixels labelled with their true part (NaN if none).
+    correct, total : (15,) int
+        Per true part: correctly labelled and all foreground pixels.
+    """
+    n_parts = len(PART_NAMES)
+    correct = np.zeros(n_parts, dtype=np.int64)
+    total = np.zeros(n_parts, dtype=np.int64)
+    for frame in frames:
+        mask = frame.mask
+        pred = forest.predict(frame.depth, mask, frame.intrinsics)
+        truth = frame.labels[mask].astype(np.intp) - 1
+        guess = pred.labels[mask]
+        total += np.bincount(truth, minlength=n_parts)[:n_parts]
+        correct += np.bincount(truth[guess == truth], minlength=n_parts)[:n_parts]
+    accuracy = float(correct.sum() / total.sum()) if total.sum() else float("nan")
+    return accuracy, correct, total
+
+
+def read_label_folder(
+    folder: str | Path, *, max_frames: int | None = None
+) -> Iterator[tuple[str, LabelledFrame]]:
+    """Frames of a folder written by ``posedrift synth``: ``(name, LabelledFrame)`` each.
+
+    Reads ``ground_truth.json`` (intrinsics), ``depth/NNNNNN.png`` (uint16 millimetres)
+    and ``labels/NNNNNN.png`` (part index + 1).
+
+    Raises
+    ------
+    ValueError
+        If the folder, its ``ground_truth.json`` or a frame cannot be read, naming it.
+    """
+    import imageio.v3 as iio
+
+    folder = Path(folder)
+    truth_path = folder / "ground_truth.json"
+    try:
+        intrinsics = Intrinsics.from_dict(json.loads(truth_path.read_text())["intrinsics"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(
+            f"{folder} is not a folder written by 'posedrift synth': cannot read "
+            f"{truth_path.name} ({exc})."
+        ) from exc
+    names = sorted(p.name for p in (folder / "depth").glob("*.png"))
+    if not names:
+        raise ValueError(f"{folder / 'depth'} holds no depth PNG frames.")
+    for name in names[:max_frames]:
+        try:
+            raw = np.asarray(iio.imread(folder / "depth" / name))
+            labels = np.asarray(iio.imread(folder / "labels" / name))
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"Cannot read frame {name} of {folder}: {exc}") from exc
+        if raw.shape != intrinsics.shape or labels.shape != intrinsics.shape:
+            raise ValueError(
+                f"Frame {name} of {folder} has depth {raw.shape} and labels {labels.shape}; "
+                f"the intrinsics say {intrinsics.shape}."
+            )
+        if labels.max(initial=0) > len(PART_NAMES):
+            raise ValueError(
+                f"Frame {name} of {folder} has label {int(labels.max())}; labels are 0..15."
+            )
+        depth = raw.astype(np.float32) / np.float32(1000.0)
+        yield name, LabelledFrame(depth, labels.astype(np.uint8), intrinsics)
+
+
+def colour_labels(labels: np.ndarray) -> np.ndarray:
+    """``(H, W, 3)`` uint8 picture of a part-index map (-1 background: black)."""
+    palette = np.vstack([np.zeros((1, 3)), np.asarray(PART_COLOURS)]).astype(np.uint8)
+    return palette[np.clip(np.asarray(labels).astype(np.intp) + 1, 0, len(PART_NAMES))]
+
+
+def colour_depth(depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``(H, W, 3)`` uint8 grey picture of the foreground depth (near: bright)."""
+    out = np.zeros((*depth.shape, 3), dtype=np.uint8)
+    if mask.any():
+        d = depth[mask]
+        lo, hi = float(d.min()), float(d.max())
+        grey = 255 - 200 * (d - lo) / max(hi - lo, 1e-6)
+        out[mask] = np.clip(grey, 0, 255).astype(np.uint8)[:, None]
+    return out
+
+
+def comparison_picture(frames: Sequence[tuple[LabelledFrame, np.ndarray]]) -> np.ndarray:
+    """Rows of ``depth | truth | prediction`` pictures, one row per frame, uint8 RGB."""
+    rows = []
+    for frame, predicted in frames:
+        mask = frame.mask
+        truth = np.where(mask, frame.labels.astype(np.intp) - 1, -1)
+        gap = np.full((frame.depth.shape[0], 4, 3), 255, dtype=np.uint8)
+        rows.append(
+            np.hstack(
+                [
+                    colour_depth(frame.depth, mask),
+                    gap,
+                    colour_labels(truth),
+                    gap,
+                    colour_labels(predicted),
+                ]
+            )
+        )
+        rows.append(np.full((4, rows[-1].shape[1], 3), 255, dtype=np.uint8))
+    return np.vstack(rows[:-1])
+
+
+def evaluate_label_folder(
+    folder: str | Path,
+    forest: BodyPartForest,
+    *,
+    max_frames: int | None = None,
+    png: str | Path | None = None,
+    n_pictures: int = 4,
+    progress: bool = False,
+) -> dict:
+    """Per-pixel label accuracy of ``forest`` on a ``posedrift synth`` folder.
+
+    The forest sees each frame's depth and the true silhouette as its mask.
+
+    Returns
+    -------
+    dict
+        ``{"pixel_accuracy": x, "per_part": {part: x}, "frames": n, "ms_per_frame": x}``
+        (per-part accuracy: the share of that part's pixels labelled correctly; null
+        for a part never seen). ``ms_per_frame`` is the median time of ``predict``.
+    """
+    n_parts = len(PART_NAMES)
+    correct = np.zeros(n_parts, dtype=np.int64)
+    total = np.zeros(n_parts, dtype=np.int64)
+    times = []
+    pictures: list[tuple[LabelledFrame, np.ndarray]] = []
+    frames = list(read_label_folder(folder, max_frames=max_frames))
+    picked = set(np.linspace(0, len(frames) - 1, min(n_pictures, len(frames))).astype(int))
+    with _progress(progress, "labelling", len(frames)) as advance:
+        for i, (_, frame) in enumerate(frames):
+            mask = frame.mask
+            started = time.perf_counter()
+            pred = forest.predict(frame.depth, mask, frame.intrinsics)
+            times.append(time.perf_counter() - started)
+            truth = frame.labels[mask].astype(np.intp) - 1
+            guess = pred.labels[mask]
+            total += np.bincount(truth, minlength=n_parts)[:n_parts]
+            correct += np.bincount(truth[guess == truth], minlength=n_parts)[:n_parts]
+            if i in picked:
+                pictures.append((frame, pred.labels))
+            advance()
+    if png is not None and pictures:
+        import imageio.v3 as iio
+
+        Path(png).parent.mkdir(parents=True, exist_ok=True)
+        iio.imwrite(png, comparison_picture(pictures))
+    per_part = {
+        name: (float(correct[i] / total[i]) if total[i] else None)
+        for i, name in enumerate(PART_NAMES)
+    }
+    return {
+        "pixel_accuracy": float(correct.sum() / total.sum()) if total.sum() else None,
+        "per_part": per_part,
+        "frames": len(frames),
+        "ms_per_frame": float(np.median(times) * 1e3) if times else None,
+    }
+
+
+@contextmanager
+def _progress(enabled: bool, description: str, total: int | None) -> Iterator[Callable[[], None]]:
+    """A rich progress bar (or nothing) yielding an ``advance()`` callable."""
+    if not enabled:
+        yield lambda: None
+        return
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        transient=False,
+    ) as bar:
+        task = bar.add_task(description, total=total)
+        yield lambda: bar.advance(task)
+
+
+@dataclass(frozen=True)
+class SceneRanges:
+    """Ranges the training views are drawn from (uniformly).
+
+    Parameters
+    ----------
+    height : (float, float)
+        Stature of the body model, metres.
+    girth : (float, float)
+        Girth factor of the body model.
+    yaw : float
+        Largest angle in degrees between the camera direction and the person's facing.
+    distance : (float, float)
+        Horizontal distance camera to pelvis, metres.
+    camera_height : (float, float)
+        Metres above the floor.
+    noise_fraction : float
+        Share of frames with Kinect-like noise.
+    t_pose_fraction : float
+        Share of frames showing a clip's first frame (the T-pose calibration pose).
+    """
+
+    height: tuple[float, float] = (1.5, 1.95)
+    girth: tuple[float, float] = (0.85, 1.2)
+    yaw: float = 45.0
+    distance: tuple[float, float] = (2.0, 3.5)
+    camera_height: tuple[float, float] = (0.7, 1.3)
+    noise_fraction: float = 0.5
+    t_pose_fraction: float = 0.1
+
+
+def _stature(joints: np.ndarray) -> float:
+    """Stature of a standing skeleton: head centre (0.935 H) above the ankles (0.039 H)."""
+    from posedrift.skeleton import JOINT_INDEX
+
+    ankle = 0.5 * (joints[JOINT_INDEX["right_foot"], 1] + joints[JOINT_INDEX["left_foot"], 1])
+    return max(float(joints[JOINT_INDEX["head"], 1] - ankle) / (0.935 - 0.039), 0.5)
+
+
+def random_shape(
+    rng: np.random.Generator, ranges: SceneRanges, morph_names: Sequence[str]
+) -> dict:
+    """Keyword arguments of ``BodyModel.with_shape``: height, girth and up to three morphs.
+
+    ``female`` (when the body has it) on half of the bodies; up to two other morphs
+    of ``morph_names`` at weights in [0, 0.8].
+    """
+    morphs = {}
+    names = [n for n in morph_names if n != "female"]
+    if "female" in morph_names and rng.uniform() < 0.5:
+        morphs["female"] = float(rng.uniform(0.3, 1.0))
+    if names:
+        for k in rng.choice(len(names), size=int(rng.integers(0, 3)), replace=False):
+            morphs[names[int(k)]] = float(rng.uniform(0.0, 0.8))
+    return {
+        "height": float(rng.uniform(*ranges.height)),
+        "girth": float(rng.uniform(*ranges.girth)),
+        "morphs": morphs,
+    }
+
+
+def _facing(joints: np.ndarray) -> np.ndarray:
+    """Horizontal unit vector the person faces (from the hips; +X person's left)."""
+    from posedrift.skeleton import JOINT_INDEX
+
+    across = joints[JOINT_INDEX["left_hip"]] - joints[JOINT_INDEX["right_hip"]]
+    facing = np.cross(across, [0.0, 1.0, 0.0])
+    facing[1] = 0.0
+    norm = np.linalg.norm(facing)
+    return facing / norm if norm > 1e-9 else np.array([0.0, 0.0, 1.0])
+
+
+def render_training_frame(
+    joints: np.ndarray,
+    extras: dict[str, np.ndarray],
+    body,
+    intrinsics: Intrinsics,
+    *,
+    yaw: float,
+    distance: float,
+    camera_height: float,
+    aim_at_body: bool,
+    noise: bool,
+    rng: np.random.Generator,
+) -> LabelledFrame:
+    """Pose ``body`` on world ``joints`` and render it from a camera ``yaw`` degrees off
+    the person's facing direction (positive: toward the person's left)."""
+    from posedrift.camera import CameraPose
+    from posedrift.skeleton import pelvis_centre
+    from posedrift.synthetic import kinect_noise, render
+
+    centre = pelvis_centre(joints)
+    facing = _facing(joints)
+    angle = np.radians(yaw)
+    direction = np.array(
+        [
+            facing[0] * np.cos(angle) + facing[2] * np.sin(angle),
+            0.0,
+            -facing[0] * np.sin(angle) + facing[2] * np.cos(angle),
+        ]
+    )
+    eye = np.array([centre[0], camera_height, centre[2]]) + distance * direction
+    target_y = float(centre[1]) if aim_at_body else camera_height
+    target = np.array([centre[0], target_y, centre[2]])
+    camera = CameraPose.look_at(eye, target)
+    vertices = body.pose(joints, extras)
+    out = render(
+        camera.world_to_camera(vertices),
+        np.asarray(body.faces),
+        intrinsics,
+        vertex_parts=np.asarray(body.vertex_parts),
+        cull_backfaces=True,
+    )
+    depth, labels = out.depth, out.labels
+    if noise:
+        depth = kinect_noise(depth, rng=rng)
+        labels = np.where(depth > 0, labels, 0).astype(np.uint8)
+    return LabelledFrame(depth=depth, labels=labels, intrinsics=intrinsics)
+
+
+def synthetic_training_frames(
+    n_frames: int,
+    motions: Sequence,
+    *,
+    ranges: SceneRanges | None = None,
+    intrinsics: Intrinsics | None = None,
+    body=None,
+    min_pixels: int = 300,
+    rng: int | np.random.Generator | None = None,
+) -> Iterator[LabelledFrame]:
+    """Rendered training frames: random poses of random bodies seen from random views.
+
+    Each frame draws a motion (uniformly), a frame of it (its first, the T-pose,
+    with probability ``ranges.t_pose_fraction``), a body shape, a view and noise
+    from ``ranges``. The skeleton is scaled to the body's stature. Frames showing
+    fewer than ``min_pixels`` person pixels are drawn again.
+
+    Parameters
+    ----------
+    n_frames : int
+    motions : sequence of Motion
+        World frame: metres, +Y up, floor y = 0.
+    ranges : SceneRanges, optional
+    intrinsics : Intrinsics, optional
+        Default the ``kinect1-qvga`` preset.
+    body : BodyModel, optional
+        Default :meth:`BodyModel.load_default`.
+    rng : int, Generator or None
+
+    Yields
+    ------
+    LabelledFrame
+    """
+    from posedrift.camera import camera_preset
+    from posedrift.synthetic import BodyModel
+
+    rng = check_rng(rng)
+    ranges = ranges or SceneRanges()
+    intrinsics = intrinsics or camera_preset("kinect1-qvga")
+    base = body if body is not None else BodyModel.load_default()
+    if not motions:
+        raise ValueError("synthetic_training_frames needs at least one motion.")
+    statures = [_stature(np.asarray(m.joints[0], dtype=float)) for m in motions]
+    made = 0
+    attempts = 0
+    while made < n_frames:
+        attempts += 1
+        if attempts > 10 * n_frames + 100:
+            raise ValueError("synthetic_training_frames: too many views without a person.")
+        k = int(rng.integers(len(motions)))
+        motion = motions[k]
+        t = 0 if rng.uniform() < ranges.t_pose_fraction else int(rng.integers(len(motion.joints)))
+        shape = random_shape(rng, ranges, base.morph_names)
+        height = shape["height"]
+        joints = np.asarray(motion.joints[t], dtype=float)
+        extras = {name: np.asarray(v[t], dtype=float) for name, v in (motion.extras or {}).items()}
+        scale = height / statures[k]
+        origin = np.array([joints[:, 0].mean(), 0.0, joints[:, 2].mean()])
+        joints = origin + (joints - origin) * scale
+        extras = {name: origin + (v - origin) * scale for name, v in extras.items()}
+        shaped = base.with_shape(**shape)
+        frame = render_training_frame(
+            joints,
+            extras,
+            shaped,
+            intrinsics,
+            yaw=rng.uniform(-ranges.yaw, ranges.yaw),
+            distance=rng.uniform(*ranges.distance),
+            camera_height=rng.uniform(*ranges.camera_height),
+            aim_at_body=bool(rng.uniform() < 0.5),
+            noise=bool(rng.uniform() < ranges.noise_fraction),
+            rng=rng,
+        )
+        if np.count_nonzero(frame.mask) < min_pixels:
+            continue
+        made += 1
+        yield frame
+
+
+HELD_OUT_CLIPS: tuple[str, ...] = ("007_*", "131_03*")
+"""Development clips kept out of training (the accuracy figure is measured on them)."""
+
+
+def training_clips(
+    mocap_dir: str | Path | None, *, exclude: Sequence[str] = HELD_OUT_CLIPS
+) -> list[Path]:
+    """The BVH files under ``mocap_dir`` (recursively) whose names match no ``exclude`` glob."""
+    import fnmatch
+
+    if mocap_dir is None:
+        return []
+    root = Path(mocap_dir)
+    if not root.is_dir():
+        raise ValueError(f"The motion capture folder {root} does not exist.")
+    paths = sorted(root.rglob("*.bvh"))
+    return [p for p in paths if not any(fnmatch.fnmatch(p.name, pat) for pat in exclude)]
+
+
+def load_training_motions(
+    paths: Sequence[str | Path],
+    *,
+    procedural: bool = True,
+    fps: float = 30.0,
+    on_motion: Callable[[str], None] | None = None,
+) -> list:
+    """Motions for training: the BVH clips (resampled to ``fps``) and the procedural one.
+
+    Raises
+    ------
+    ValueError
+        If a BVH file cannot be read (naming it), or no motion is left.
+    """
+    from posedrift.synthetic import bvh_motion, procedural_motion
+
+    motions = []
+    for path in paths:
+        motion = bvh_motion(path)
+        motions.append(motion.resample(fps) if abs(motion.fps - fps) > 1e-9 else motion)
+        if on_motion is not None:
+            on_motion(Path(path).name)
+    if procedural:
+        motions.append(procedural_motion(fps=fps))
+        if on_motion is not None:
+            on_motion("procedural")
+    if not motions:
+        raise ValueError("No motion to train on: give BVH clips or keep the procedural motion.")
+    return motions

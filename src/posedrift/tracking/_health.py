@@ -1,0 +1,144 @@
+"""Is the track still good? Loss detection from the registration and the skeleton fit."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from posedrift.skeleton._definitions import JOINT_INDEX, PART_JOINTS, PART_NAMES
+
+_J = JOINT_INDEX
+
+
+@dataclass(frozen=True)
+class Health:
+    """The verdict on one frame's track.
+
+    Attributes
+    ----------
+    ok : bool
+    reason : str
+        Why the track was judged lost ("" when ok).
+    score : float
+        Lower is better: the share of points the skeleton does not explain, plus
+        penalties (used to compare a tracked fit with a re-initialized one).
+    unexplained : float
+        Share of points farther than ``max_distance`` from their own part's bone.
+    measured : float
+        Share of joints measured from this frame's labels.
+    """
+
+    ok: bool
+    reason: str
+    score: float
+    unexplained: float
+    measured: float
+
+
+def _segments(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Start and end ``(15, 3)`` of each part's bone (hands and feet as short stubs)."""
+    j = joints
+    pelvis = 0.5 * (j[_J["right_hip"]] + j[_J["left_hip"]])
+    named = {name: j[i] for name, i in _J.items()}
+    named["pelvis"] = pelvis
+    for side in ("right", "left"):
+        fore = j[_J[f"{side}_hand"]] - j[_J[f"{side}_elbow"]]
+        named[f"{side}_hand_tip"] = j[_J[f"{side}_hand"]] + 0.6 * fore
+        shank = j[_J[f"{side}_foot"]] - j[_J[f"{side}_knee"]]
+        named[f"{side}_toe"] = j[_J[f"{side}_foot"]] + 0.15 * shank
+    starts = np.array([named[a] for a, _ in PART_JOINTS])
+    ends = np.array([named[b] for _, b in PART_JOINTS])
+    # The torso parts are wide: widen their "bones" to the shoulders and hips.
+    return starts, ends
+
+
+def bone_distances(points: np.ndarray, labels: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """Distance (metres) from each point to the bone of its own part; NaN where unknown."""
+    starts, ends = _segments(np.asarray(joints, dtype=float))
+    lab = np.asarray(labels).astype(np.int64)
+    ok = (lab >= 0) & (lab < len(PART_NAMES))
+    out = np.full(len(points), np.nan)
+    if not ok.any():
+        return out
+    a, b = starts[lab[ok]], ends[lab[ok]]
+    ab = b - a
+    denom = np.einsum("ij,ij->i", ab, ab)
+    t = np.clip(np.einsum("ij,ij->i", points[ok] - a, ab) / np.where(denom > 0, denom, 1.0), 0, 1)
+    out[ok] = np.linalg.norm(points[ok] - (a + t[:, None] * ab), axis=1)
+    return out
+
+
+# Expected surface distance of each part's points from its bone (metres): torso parts are wide.
+_PART_REACH = np.array(
+    [0.13, 0.22, 0.2, 0.08, 0.08, 0.07, 0.07, 0.08, 0.08, 0.11, 0.11, 0.08, 0.08, 0.1, 0.1]
+)
+
+
+def assess(
+    points: np.ndarray,
+    labels: np.ndarray,
+    joints: np.ndarray,
+    measured: np.ndarray,
+    *,
+    height: float,
+    sigma: float | None = None,
+    max_unexplained: float = 0.25,
+    max_sigma: float = 0.08,
+    min_measured: float = 0.5,
+    slack: float = 0.06,
+) -> Health:
+    """Judge one frame's registration and skeleton fit.
+
+    Lost when: the skeleton has unknown joints; more than ``max_unexplained`` of
+    the points lie farther from their own part's bone than that part's expected
+    reach plus ``slack`` (labels that the skeleton does not explain); fewer than
+    ``min_measured`` of the joints were measured; or the registration's residual
+    ``sigma`` (metres) exceeds ``max_sigma``.
+
+    Parameters
+    ----------
+    points : (N, 3) float
+    labels : (N,) int
+    joints : (15, 3) float
+    measured : (15,) bool
+    height : float
+        Stature in metres (scales the expected reach of each part).
+    sigma : float, optional
+        Registration residual in metres (``sqrt(sigma^2)``).
+
+    Returns
+    -------
+    Health
+    """
+    joints = np.asarray(joints, dtype=float)
+    meas = float(np.mean(measured))
+    if not np.isfinite(joints).all():
+        return Health(False, "the skeleton has unknown joints", np.inf, 1.0, meas)
+    dist = bone_distances(points, labels, joints)
+    lab = np.asarray(labels).astype(np.int64)
+    reach = _PART_REACH * (height / 1.75)
+    limit = np.where((lab >= 0) & (lab < len(reach)), reach[np.clip(lab, 0, 14)] + slack, 0.0)
+    bad = ~np.isfinite(dist) | (dist > limit)
+    unexplained = float(np.mean(bad)) if len(bad) else 1.0
+    score = unexplained + 0.5 * (1.0 - meas)
+    if sigma is not None and np.isfinite(sigma):
+        score += max(0.0, sigma - 0.02)
+    if unexplained > max_unexplained:
+        return Health(
+            False,
+            f"{100 * unexplained:.0f}% of the points are far from their part's bone",
+            score,
+            unexplained,
+            meas,
+        )
+    if meas < min_measured:
+        return Health(
+            False, f"only {100 * meas:.0f}% of the joints are supported by the labels", score,
+            unexplained, meas,
+        )
+    if sigma is not None and np.isfinite(sigma) and sigma > max_sigma:
+        return Health(
+            False, f"the registration residual is {100 * sigma:.1f} cm", score, unexplained, meas
+        )
+    return Health(True, "", score, unexplained, meas)

@@ -1,0 +1,434 @@
+"""The tracker: depth frames in, a pose per frame out (the paper's Sections 3.1-3.4).
+
+Per frame: segment the person; back-project (Eq. 1); downsample to about 400
+points; register the previous frame's labelled points onto them (nonrigid CPD,
+Algorithm 1, warm-started); carry the labels over through the posterior; relabel
+by geodesic reach from the part joints (Algorithm 2); mean-shift part modes; fit the
+skeleton with the calibrated bone lengths; judge the track's health, and
+re-initialize from the body-part forest when it is lost.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from posedrift._validation import check_rng, check_scalar
+from posedrift.camera import DepthFrame, Intrinsics, backproject
+from posedrift.labelling._relabel import geodesic_graph, relabel
+from posedrift.points._downsample import downsample
+from posedrift.points._segment import BackgroundModel, segment_person
+from posedrift.skeleton._fit import SkeletonFit, fit_skeleton, part_anchors
+from posedrift.skeleton._meanshift import part_modes
+from posedrift.tracking._health import Health, assess
+from posedrift.tracking._init import Calibration, calibrate, label_template_points, smooth_labels
+from posedrift.tracking._result import FrameResult, FrameStatus
+
+N_PARTS = 15
+
+
+@dataclass
+class _State:
+    """What the tracker carries from one frame to the next."""
+
+    points: np.ndarray  # (M, 3) the labelled template (previous frame's points)
+    labels: np.ndarray  # (M,)
+    joints: np.ndarray  # (15, 3) previous skeleton
+    registration: Any = None  # previous CPDResult (warm start)
+
+
+@dataclass
+class _Attempt:
+    labels: np.ndarray
+    fit: SkeletonFit
+    health: Health
+    registration: Any = None
+
+
+def _icp(source: np.ndarray, target: np.ndarray, iterations: int = 10):
+    """Rigid ICP of ``source`` onto ``target``: (rotation, translation, nn index per target)."""
+    from scipy.spatial import cKDTree
+
+    rot, trans = np.eye(3), np.zeros(3)
+    tree_t = cKDTree(target)
+    moved = source
+    for _ in range(iterations):
+        d, idx = tree_t.query(moved)
+        keep = d <= max(np.percentile(d, 90), 1e-9)
+        a, b = source[keep], target[idx[keep]]
+        ca, cb = a.mean(axis=0), b.mean(axis=0)
+        u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
+        s = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
+        rot = vt.T @ s @ u.T
+        trans = cb - rot @ ca
+        moved = source @ rot.T + trans
+    _, nn = cKDTree(moved).query(target)
+    return rot, trans, nn
+
+
+class PoseTracker:
+    """3-D pose from depth frames by nonrigid CPD body-part tracking.
+
+    Implements :class:`posedrift.tracking.PoseMethod` (``name = "cpd"``): give it
+    the camera's intrinsics, then depth frames one at a time; each call of
+    :meth:`process` returns a frozen :class:`FrameResult`. It never sees ground truth.
+
+    Parameters
+    ----------
+    intrinsics : Intrinsics
+    n_points : int
+        Points per frame after uniform downsampling (the paper's about 400).
+    forest : BodyPartForest, optional
+        Labels the (re)initialization frames; any object with the same ``predict``
+        works. Loaded lazily with ``BodyPartForest.load_default()`` when None.
+    relabel : bool
+        Apply Algorithm 2 (geodesic relabelling) every frame.
+    registration : {"nonrigid", "rigid"}
+        The CPD transform family.
+    correspondence : {"cpd", "icp"}
+        ``"icp"``: nearest-neighbour correspondences after rigid ICP in the same
+        loop (the ICP baseline).
+    warm_start : bool
+        Start each registration from the previous frame's sigma^2.
+    kernel_width, smoothness, outlier_weight : float
+        beta, lambda and w of nonrigid CPD (normalized units).
+    max_iter : int
+        EM iterations per frame at most.
+    alpha : float
+        Steepness (1/m) of Algorithm 2's sigmoid.
+    height : float, optional
+        The person's stature in metres, if known (otherwise measured at initialization).
+    background : BackgroundModel, optional
+        A static camera's background model for segmentation.
+    segment_options : dict, optional
+        Extra keyword arguments of :func:`posedrift.points.segment_person`.
+    rng : int or Generator
+        Seeds downsampling and RANSAC (runs are repeatable for an int).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from posedrift.camera import DepthFrame, camera_preset
+    >>> k = camera_preset("kinect1-qvga")
+    >>> tracker = PoseTracker(k)
+    >>> result = tracker.process(DepthFrame(np.zeros(k.shape, np.float32), k, index=0))
+    >>> result.status.value
+    'no_person'
+    """
+
+    name = "cpd"
+
+    def __init__(
+        self,
+        intrinsics: Intrinsics,
+        *,
+        n_points: int = 400,
+        forest: Any = None,
+        relabel: bool = True,
+        registration: str = "nonrigid",
+        correspondence: str = "cpd",
+        warm_start: bool = True,
+        kernel_width: float = 0.5,
+        smoothness: float = 1.0,
+        outlier_weight: float = 0.05,
+        max_iter: int = 40,
+        tol: float = 1e-4,
+        alpha: float = 60.0,
+        height: float | None = None,
+        background: BackgroundModel | None = None,
+        segment_options: dict | None = None,
+        min_points: int = 60,
+        rng: int | np.random.Generator | None = 0,
+    ) -> None:
+        caller = "PoseTracker"
+        if not isinstance(intrinsics, Intrinsics):
+            raise ValueError(
+                f"The 'intrinsics' argument of {caller} must be an Intrinsics. "
+                f"Got {type(intrinsics).__name__} instead."
+            )
+        if registration not in ("nonrigid", "rigid"):
+            raise ValueError(
+                f"The 'registration' parameter of {caller} must be 'nonrigid' or 'rigid'. "
+                f"Got {registration!r} instead."
+            )
+        if correspondence not in ("cpd", "icp"):
+            raise ValueError(
+                f"The 'correspondence' parameter of {caller} must be 'cpd' or 'icp'. "
+                f"Got {correspondence!r} instead."
+            )
+        self.n_points = check_scalar(n_points, "n_points", low=20, include_low=True,
+                                     integer=True, caller=caller)
+        self.kernel_width = check_scalar(kernel_width, "kernel_width", low=0.0, caller=caller)
+        self.smoothness = check_scalar(smoothness, "smoothness", low=0.0, caller=caller)
+        self.outlier_weight = check_scalar(outlier_weight, "outlier_weight", low=0.0, high=1.0,
+                                           include_low=True, caller=caller)
+        self.max_iter = check_scalar(max_iter, "max_iter", low=1, include_low=True, integer=True,
+                                     caller=caller)
+        self.tol = check_scalar(tol, "tol", low=0.0, caller=caller)
+        self.alpha = check_scalar(alpha, "alpha", low=0.0, caller=caller)
+        if height is not None:
+            height = check_scalar(height, "height", low=0.5, high=2.6, caller=caller)
+        self.height = height
+        self.min_points = int(min_points)
+        self.relabel = bool(relabel)
+        self.registration = registration
+        self.correspondence = correspondence
+        self.warm_start = bool(warm_start)
+        self.forest = forest
+        self.background = background
+        self.segment_options = dict(segment_options or {})
+        self._seed = rng
+        self._raise_errors = False  # development switch: let exceptions escape process()
+        self.reset(intrinsics)
+
+    # ------------------------------------------------------------------ public API
+    def reset(self, intrinsics: Intrinsics) -> None:
+        """Forget the track (and the calibration) and prepare for a new sequence."""
+        self.intrinsics = intrinsics
+        self._rng = check_rng(self._seed if not isinstance(self._seed, np.random.Generator)
+                              else self._seed)
+        self._state: _State | None = None
+        self._calibration: Calibration | None = None
+        self._voxel: float | None = None
+
+    @property
+    def calibration(self) -> Calibration | None:
+        """The person's calibration (stature, bone lengths), once initialized."""
+        return self._calibration
+
+    def process(self, frame: DepthFrame) -> FrameResult:
+        """Recover the pose in one frame.
+
+        Bad content (no person, all zeros, NaNs, unusable labels) gives a result
+        with status ``no_person`` or ``lost`` and a message naming the frame; the
+        next frame is then tracked or re-initialized. Only a non-``DepthFrame``
+        argument raises.
+
+        Parameters
+        ----------
+        frame : DepthFrame
+
+        Returns
+        -------
+        FrameResult
+        """
+        if not isinstance(frame, DepthFrame):
+            raise ValueError(
+                f"The 'frame' argument of PoseTracker.process must be a DepthFrame. "
+                f"Got {type(frame).__name__} instead."
+            )
+        where = f"frame {frame.index}" + (f" ({frame.source})" if frame.source else "")
+        try:
+            return self._process(frame, where)
+        except Exception as exc:  # noqa: BLE001 - one bad frame must not end the sequence
+            if self._raise_errors:
+                raise
+            self._state = None
+            return FrameResult.empty(
+                frame.index,
+                FrameStatus.LOST,
+                f"{where}: could not be processed ({type(exc).__name__}: {exc})",
+                timestamp=frame.timestamp,
+            )
+
+    # ------------------------------------------------------------------ the loop
+    def _process(self, frame: DepthFrame, where: str) -> FrameResult:
+        timings: dict[str, float] = {}
+        t0 = time.perf_counter()
+        intr = frame.intrinsics
+        depth = frame.depth
+        if not np.any(depth > 0):
+            self._state = None
+            return FrameResult.empty(
+                frame.index, FrameStatus.NO_PERSON, f"{where}: no valid depth in the frame",
+                timestamp=frame.timestamp,
+            )
+        mask = segment_person(frame, background=self.background, rng=0, **self.segment_options)
+        n_mask = int(mask.sum())
+        t1 = time.perf_counter()
+        timings["segment"] = 1e3 * (t1 - t0)
+        if n_mask < self.min_points:
+            self._state = None
+            return FrameResult.empty(
+                frame.index, FrameStatus.NO_PERSON,
+                f"{where}: no person found ({n_mask} foreground pixels)",
+                timestamp=frame.timestamp, timings_ms=timings,
+            )
+        full, pixels = backproject(depth, intr, mask)
+        points, self._voxel = downsample(
+            full, self.n_points, voxel_size=self._voxel, rng=self._rng, return_voxel_size=True
+        )
+        t2 = time.perf_counter()
+        timings["points"] = 1e3 * (t2 - t1)
+        graph = geodesic_graph(points)
+        timings["graph"] = 1e3 * (time.perf_counter() - t2)
+
+        status = FrameStatus.TRACKED
+        attempt = None
+        message = ""
+        if self._state is not None and self._calibration is not None:
+            attempt = self._track(points, graph, timings)
+            if not attempt.health.ok:
+                message = f"{where}: track lost ({attempt.health.reason}); re-initialized"
+        if attempt is None or not attempt.health.ok:
+            t3 = time.perf_counter()
+            fresh = self._initialize(depth, intr, mask, full, pixels, points, graph)
+            timings["initialize"] = 1e3 * (time.perf_counter() - t3)
+            if fresh is not None and (
+                fresh.health.ok or attempt is None or fresh.health.score < attempt.health.score
+            ):
+                attempt = fresh
+                status = FrameStatus.REINITIALIZED
+            if attempt is None or not attempt.health.ok:
+                reason = (
+                    "no usable body-part labels"
+                    if attempt is None
+                    else attempt.health.reason
+                )
+                self._state = None
+                timings["total"] = 1e3 * (time.perf_counter() - t0)
+                return FrameResult.empty(
+                    frame.index, FrameStatus.LOST, f"{where}: no pose ({reason})",
+                    timestamp=frame.timestamp, timings_ms=timings,
+                )
+            if status is FrameStatus.TRACKED:
+                message = ""
+        fit = attempt.fit
+        self._state = _State(
+            points=points, labels=attempt.labels, joints=fit.joints,
+            registration=attempt.registration,
+        )
+        timings["total"] = 1e3 * (time.perf_counter() - t0)
+        return FrameResult(
+            index=frame.index,
+            status=status,
+            joints=fit.joints,
+            confidence=fit.confidence,
+            points=points,
+            labels=attempt.labels,
+            timestamp=frame.timestamp,
+            timings_ms=timings,
+            message=message if status is FrameStatus.REINITIALIZED else "",
+        )
+
+    def _register(self, source: np.ndarray, target: np.ndarray, labels: np.ndarray):
+        """Registration of the template onto the frame: (posterior (N,15), warp, result, sigma)."""
+        if self.correspondence == "icp":
+            rot, trans, nn = _icp(source, target)
+            post = np.zeros((len(target), N_PARTS))
+            post[np.arange(len(target)), labels[nn]] = 1.0
+            moved = source @ rot.T + trans
+            sigma = float(np.sqrt(np.mean(np.sum((target - moved[nn]) ** 2, axis=1))))
+            return post, (lambda p: np.asarray(p) @ rot.T + trans), None, sigma
+        from posedrift.registration import ConvergenceWarning, register_nonrigid, register_rigid
+
+        prev = self._state.registration if (self.warm_start and self._state) else None
+        if prev is not None and prev.kind != self.registration:
+            prev = None
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            if self.registration == "rigid":
+                res = register_rigid(
+                    source, target, outlier_weight=self.outlier_weight, tol=self.tol,
+                    max_iter=self.max_iter, warm_start=None,
+                )
+            else:
+                res = register_nonrigid(
+                    source, target, kernel_width=self.kernel_width, smoothness=self.smoothness,
+                    outlier_weight=self.outlier_weight, tol=self.tol, max_iter=self.max_iter,
+                    warm_start=prev,
+                )
+        post = res.transfer_labels(labels.astype(np.int64), N_PARTS)
+        return post, res.apply, res, float(np.sqrt(max(res.sigma2, 0.0)))
+
+    def _track(self, points: np.ndarray, graph, timings: dict[str, float]) -> _Attempt:
+        state, cal = self._state, self._calibration
+        t0 = time.perf_counter()
+        post, warp, res, sigma = self._register(state.points, points, state.labels)
+        t1 = time.perf_counter()
+        timings["register"] = 1e3 * (t1 - t0)
+        labels = np.argmax(post, axis=1)
+        empty = post.sum(axis=1) <= 1e-12
+        if empty.any():  # Outliers: the label of the nearest inlier.
+            inl = ~empty
+            if inl.any():
+                from scipy.spatial import cKDTree
+
+                _, nn = cKDTree(points[inl]).query(points[empty])
+                labels[empty] = labels[inl][nn]
+        prediction = warp(state.joints)
+        if self.relabel:
+            anchors = part_anchors(prediction, cal.bone_lengths)
+            labels = relabel(
+                points, labels, anchors, height=cal.height, ratios=cal.reach,
+                alpha=self.alpha, evidence=post, graph=graph,
+            )
+        t2 = time.perf_counter()
+        timings["relabel"] = 1e3 * (t2 - t1)
+        attempt = self._fit(points, labels, graph, prediction, sigma=sigma)
+        attempt.registration = res
+        timings["skeleton"] = 1e3 * (time.perf_counter() - t2)
+        return attempt
+
+    def _fit_with(self, cal, points, labels, graph) -> _Attempt:
+        saved, self._calibration = self._calibration, cal
+        try:
+            return self._fit(points, labels, graph, None)
+        finally:
+            self._calibration = saved
+
+    def _fit(self, points, labels, graph, prediction, *, sigma=None) -> _Attempt:
+        cal = self._calibration
+        modes = part_modes(points, labels, bandwidth=0.06)
+        fit = fit_skeleton(
+            points, labels, bone_lengths=cal.bone_lengths, edges=(graph.rows, graph.cols),
+            modes=modes, prediction=prediction, height=cal.height,
+        )
+        health = assess(points, labels, fit.joints, fit.measured, height=cal.height, sigma=sigma)
+        return _Attempt(labels=labels, fit=fit, health=health)
+
+    # ------------------------------------------------------------------ initialization
+    def _get_forest(self):
+        if self.forest is None:
+            from posedrift.labelling import BodyPartForest
+
+            self.forest = BodyPartForest.load_default()
+        return self.forest
+
+    def _initialize(self, depth, intr, mask, full, pixels, points, graph) -> _Attempt | None:
+        """Label the frame with the forest, calibrate (first time) and fit a skeleton."""
+        pred = self._get_forest().predict(depth, mask, intr)
+        label_img = np.asarray(pred.labels)
+        pix_labels = label_img[pixels[:, 0], pixels[:, 1]].astype(np.int64)
+        if np.count_nonzero(pix_labels >= 0) < self.min_points:
+            return None
+        labels = label_template_points(points, full, pix_labels)
+        labels = smooth_labels(labels, graph.rows, graph.cols)
+        fresh_calibration = self._calibration is None
+        if fresh_calibration:
+            self._calibration = calibrate(
+                points, labels, (graph.rows, graph.cols), full_points=full, height=self.height
+            )
+        attempt = self._fit(points, labels, graph, None)
+        if fresh_calibration and not attempt.health.ok:
+            # Keep no calibration from a frame that could not be fitted.
+            cal, self._calibration = self._calibration, None
+            attempt = self._fit_with(cal, points, labels, graph)
+            return attempt
+        if not np.isfinite(attempt.fit.joints).all():
+            return attempt
+        if self.relabel:  # Clean the forest's labels with Algorithm 2 and refit.
+            cal = self._calibration
+            anchors = part_anchors(attempt.fit.joints, cal.bone_lengths)
+            labels2 = relabel(
+                points, labels, anchors, height=cal.height, ratios=cal.reach,
+                alpha=self.alpha, graph=graph,
+            )
+            again = self._fit(points, labels2, graph, attempt.fit.joints)
+            if again.health.score <= attempt.health.score:
+                attempt = again
+        return attempt

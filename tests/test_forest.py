@@ -1,0 +1,303 @@
+"""The body-part forest: sklearn export, inference, the model file and its validation."""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from posedrift.camera import Intrinsics, camera_preset
+from posedrift.labelling import BodyPartForest, depth_features
+from posedrift.labelling._forest import FORMAT_VERSION
+from posedrift.labelling._train import (
+    LabelledFrame,
+    label_accuracy,
+    offset_bank,
+    sample_pixels,
+    train_forest,
+)
+from posedrift.skeleton import PART_NAMES
+
+CAM = camera_preset("kinect1-qvga")
+
+# A blocky figure: (part, x0, x1, y0, y1, dz), metres; x < 0 is the person's right,
+# which a camera facing the person shows on the image's left.
+_BOXES = [
+    (0, -0.09, 0.09, 0.00, 0.23, 0.00),
+    (1, -0.18, 0.18, 0.23, 0.55, 0.00),
+    (2, -0.16, 0.16, 0.55, 0.85, 0.02),
+    (3, -0.30, -0.18, 0.25, 0.55, -0.03),
+    (4, 0.18, 0.30, 0.25, 0.55, -0.03),
+    (5, -0.32, -0.20, 0.55, 0.80, -0.08),
+    (6, 0.20, 0.32, 0.55, 0.80, -0.08),
+    (7, -0.33, -0.21, 0.80, 0.95, -0.12),
+    (8, 0.21, 0.33, 0.80, 0.95, -0.12),
+    (9, -0.15, -0.01, 0.85, 1.25, 0.00),
+    (10, 0.01, 0.15, 0.85, 1.25, 0.00),
+    (11, -0.14, -0.02, 1.25, 1.65, 0.02),
+    (12, 0.02, 0.14, 1.25, 1.65, 0.02),
+    (13, -0.16, -0.02, 1.65, 1.72, -0.05),
+    (14, 0.02, 0.16, 1.65, 1.72, -0.05),
+]
+
+
+def toy_frame(rng: np.random.Generator, cam: Intrinsics = CAM) -> LabelledFrame:
+    """A 15-part box figure at a random place and distance."""
+    distance = rng.uniform(2.4, 3.2)
+    depth = np.zeros(cam.shape, np.float32)
+    labels = np.zeros(cam.shape, np.uint8)
+    s = cam.fx / distance
+    cx = cam.cx + rng.uniform(-30, 30)
+    top = cam.cy - 0.9 * s + rng.uniform(-10, 10)
+    for part, x0, x1, y0, y1, dz in _BOXES:
+        r0, r1 = int(top + y0 * s), int(top + y1 * s)
+        c0, c1 = int(cx + x0 * s), int(cx + x1 * s)
+        depth[r0:r1, c0:c1] = distance + dz
+        labels[r0:r1, c0:c1] = part + 1
+    return LabelledFrame(depth, labels, cam)
+
+
+@pytest.fixture(scope="module")
+def toy_forest() -> BodyPartForest:
+    rng = np.random.default_rng(0)
+    frames = [toy_frame(rng) for _ in range(12)]
+    return train_forest(
+        iter(frames),
+        n_frames=12,
+        n_offsets=120,
+        pixels_per_frame=600,
+        max_depth=12,
+        min_samples_leaf=2,
+        n_jobs=1,
+        rng=1,
+    )
+
+
+def _random_problem(seed: int = 0):
+    rng = np.random.default_rng(seed)
+    x = np.round(rng.normal(size=(3000, 30)), 2).astype(np.float32)
+    y = (np.abs(5 * x[:, 0] + 3 * x[:, 1]).astype(int)) % 15
+    x_test = np.round(rng.normal(size=(2000, 30)), 2).astype(np.float32)
+    return x, y, x_test, rng.normal(size=(30, 4))
+
+
+@pytest.mark.parametrize("kind", ["RandomForestClassifier", "ExtraTreesClassifier"])
+def test_export_reproduces_sklearn_exactly(kind):
+    ensemble = pytest.importorskip("sklearn.ensemble")
+    x, y, x_test, offsets = _random_problem()
+    est = getattr(ensemble, kind)(n_estimators=3, max_depth=15, random_state=0).fit(x, y)
+    forest = BodyPartForest.from_sklearn(est, offsets)
+    # Same leaf for every sample in every tree, and the same probabilities.
+    leaves = forest.apply_features(x_test) - forest.roots[None, :]
+    np.testing.assert_array_equal(leaves, est.apply(x_test))
+    np.testing.assert_allclose(
+        forest.predict_proba_features(x_test), est.predict_proba(x_test), atol=1e-6
+    )
+
+
+def test_export_maps_missing_classes_to_their_parts():
+    tree = pytest.importorskip("sklearn.tree")
+    x, y, x_test, offsets = _random_problem(1)
+    y = np.where(y % 2 == 0, 4, 11)  # only two parts present
+    est = tree.DecisionTreeClassifier(max_depth=6, random_state=0).fit(x, y)
+    proba = BodyPartForest.from_sklearn(est, offsets).predict_proba_features(x_test)
+    assert proba.shape == (2000, 15)
+    np.testing.assert_allclose(proba[:, [4, 11]], est.predict_proba(x_test), atol=1e-6)
+    assert proba[:, [i for i in range(15) if i not in (4, 11)]].max() == 0.0
+
+
+def test_frame_prediction_equals_the_feature_matrix_path(toy_forest):
+    frame = toy_frame(np.random.default_rng(5))
+    pred = toy_forest.predict(frame.depth, frame.mask, frame.intrinsics)
+    x = depth_features(
+        frame.depth, pred.pixels, toy_forest.offsets, intrinsics=CAM, mask=frame.mask
+    )
+    np.testing.assert_array_equal(pred.probabilities, toy_forest.predict_proba_features(x))
+    assert pred.labels.dtype == np.int16 and pred.labels.shape == CAM.shape
+    assert (pred.labels[~frame.mask] == -1).all()
+    np.testing.assert_array_equal(
+        pred.labels[pred.pixels[:, 0], pred.pixels[:, 1]], pred.probabilities.argmax(axis=1)
+    )
+    np.testing.assert_allclose(pred.probabilities.sum(axis=1), 1.0, atol=1e-5)
+
+
+def test_toy_forest_learns_the_parts(toy_forest):
+    rng = np.random.default_rng(7)
+    test = [toy_frame(rng) for _ in range(3)]
+    accuracy, correct, total = label_accuracy(toy_forest, test)
+    assert accuracy > 0.9
+    # Left and right are not swapped: each side's hand is mostly right.
+    assert correct[PART_NAMES.index("left_hand")] / total[PART_NAMES.index("left_hand")] > 0.7
+    assert correct[PART_NAMES.index("right_hand")] / total[PART_NAMES.index("right_hand")] > 0.7
+
+
+def test_offsets_scale_to_another_camera(toy_forest):
+    # The same scene at twice the resolution: labels agree with the QVGA ones.
+    vga = CAM.scaled(2.0)
+    frame = toy_frame(np.random.default_rng(11))
+    big = LabelledFrame(
+        np.repeat(np.repeat(frame.depth, 2, 0), 2, 1),
+        np.repeat(np.repeat(frame.labels, 2, 0), 2, 1),
+        vga,
+    )
+    accuracy, _, _ = label_accuracy(toy_forest, [big])
+    assert accuracy > 0.85
+
+
+def test_empty_mask_gives_an_empty_map(toy_forest):
+    pred = toy_forest.predict(np.zeros(CAM.shape), None, CAM)
+    assert (pred.labels == -1).all() and pred.pixels.shape == (0, 2)
+    assert pred.probabilities.shape == (0, 15)
+    frame = toy_frame(np.random.default_rng(2))
+    pred = toy_forest.predict(frame.depth, np.zeros(CAM.shape, bool), CAM)
+    assert (pred.labels == -1).all()
+
+
+def test_predict_rejects_bad_arguments(toy_forest):
+    with pytest.raises(ValueError, match="'depth'.*shape"):
+        toy_forest.predict(np.zeros((10, 10)), None, CAM)
+    with pytest.raises(ValueError, match="'mask'"):
+        toy_forest.predict(np.zeros(CAM.shape), np.zeros((3, 3), bool), CAM)
+    with pytest.raises(ValueError, match="'intrinsics'"):
+        toy_forest.predict(np.zeros(CAM.shape), None, "kinect")
+
+
+def test_save_load_round_trip(toy_forest, tmp_path):
+    path = toy_forest.save(tmp_path / "forest.npz")
+    loaded = BodyPartForest.load(path)
+    for name in ("offsets", "roots", "feature", "threshold", "left", "right", "leaf"):
+        np.testing.assert_array_equal(getattr(loaded, name), getattr(toy_forest, name))
+    np.testing.assert_allclose(loaded.leaf_values, toy_forest.leaf_values, atol=1e-3)
+    assert loaded.metadata == json.loads(json.dumps(toy_forest.metadata))
+    frame = toy_frame(np.random.default_rng(3))
+    a = toy_forest.predict(frame.depth, frame.mask, CAM)
+    b = loaded.predict(frame.depth, frame.mask, CAM)
+    assert np.mean(a.labels == b.labels) > 0.999
+
+
+def _rewrite(src: Path, dst: Path, **changes) -> Path:
+    with np.load(src, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    arrays.update(changes)
+    for key in [k for k, v in changes.items() if v is None]:
+        del arrays[key]
+    with open(dst, "wb") as handle:
+        np.savez(handle, **arrays)
+    return dst
+
+
+def test_bad_model_files_are_rejected(toy_forest, tmp_path):
+    good = toy_forest.save(tmp_path / "good.npz")
+    with np.load(good, allow_pickle=False) as npz:
+        left, feature, leaf = npz["left"].copy(), npz["feature"].copy(), npz["leaf"].copy()
+    internal = np.flatnonzero(feature >= 0)
+    cases = {
+        "version": (dict(version=np.array(FORMAT_VERSION + 1, np.int32)), "format version 2"),
+        "format": (dict(format=np.array("something-else")), "not a posedrift forest"),
+        "missing": (dict(threshold=None), "missing"),
+        "child": (dict(left=_set(left, internal[0], 10**6)), "child indices"),
+        "cycle": (dict(left=_set(left, internal[-1], 0)), "child indices"),
+        "feature": (dict(feature=_set(feature, internal[0], 10**5)), "'feature' ids"),
+        "leaf": (dict(leaf=_set(leaf, int(np.flatnonzero(leaf >= 0)[0]), 10**7)), "'leaf'"),
+        "dtype": (dict(threshold=np.zeros(len(feature), np.int32)), "'threshold'"),
+        "nan": (dict(offsets=np.full((len(toy_forest.offsets), 4), np.nan, np.float32)), "finite"),
+    }
+    for name, (change, match) in cases.items():
+        path = _rewrite(good, tmp_path / f"{name}.npz", **change)
+        with pytest.raises(ValueError, match=match):
+            BodyPartForest.load(path)
+
+
+def _set(array: np.ndarray, index: int, value: int) -> np.ndarray:
+    out = array.copy()
+    out[index] = value
+    return out
+
+
+def test_truncated_and_pickled_files_are_rejected(toy_forest, tmp_path):
+    good = toy_forest.save(tmp_path / "good.npz")
+    data = good.read_bytes()
+    truncated = tmp_path / "truncated.npz"
+    truncated.write_bytes(data[: len(data) // 2])
+    with pytest.raises(ValueError, match="truncated or corrupt"):
+        BodyPartForest.load(truncated)
+    not_zip = tmp_path / "text.npz"
+    not_zip.write_text("hello")
+    with pytest.raises(ValueError, match=r"text\.npz"):
+        BodyPartForest.load(not_zip)
+    with pytest.raises(ValueError, match="Cannot read"):
+        BodyPartForest.load(tmp_path / "absent.npz")
+    # An object array (a pickle inside the .npy) is never unpickled.
+    with np.load(good, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    arrays["metadata"] = np.array([{"evil": print}], dtype=object)
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    pickled = tmp_path / "pickled.npz"
+    pickled.write_bytes(buffer.getvalue())
+    with zipfile.ZipFile(pickled) as zf:
+        assert "metadata.npy" in zf.namelist()
+    with pytest.raises(ValueError, match="cannot be read safely"):
+        BodyPartForest.load(pickled)
+
+
+def test_offset_bank_and_pixel_sampling_are_seeded():
+    a = offset_bank(50, rng=3)
+    np.testing.assert_array_equal(a, offset_bank(50, rng=3))
+    assert a.shape == (50, 4) and np.abs(a).max() <= 1.3 * 285.63 + 1e-3
+    assert np.mean(np.all(a[:, 2:] == 0, axis=1)) > 0.05
+    frame = toy_frame(np.random.default_rng(0))
+    p = sample_pixels(frame.labels, frame.mask, 500, balance=1.0, rng=0)
+    np.testing.assert_array_equal(p, sample_pixels(frame.labels, frame.mask, 500, balance=1.0, rng=0))
+    assert frame.mask[p[:, 0], p[:, 1]].all() and len(np.unique(p, axis=0)) == 500
+    # Balanced sampling: the hands are drawn far more often than their pixel share.
+    counts = np.bincount(frame.labels[p[:, 0], p[:, 1]], minlength=16)[1:]
+    assert counts.min() >= 500 / 15 * 0.5
+
+
+def test_default_model_labels_a_held_out_clip(mocap_dir):
+    """The shipped model on three fresh frames of a clip kept out of its training."""
+    from posedrift.labelling._train import render_training_frame
+    from posedrift.synthetic import BodyModel, bvh_motion
+
+    forest = BodyPartForest.load_default()
+    assert forest.metadata["excluded"] and "007_01.bvh" not in forest.metadata["clips"]
+    motion = bvh_motion(mocap_dir / "cmu" / "007_01.bvh")
+    body = BodyModel.load_default().with_shape(height=1.68, girth=1.1)
+    rng = np.random.default_rng(0)
+    frames = []
+    for t, yaw in ((30, 0.0), (90, 25.0), (140, -30.0)):
+        joints = np.asarray(motion.joints[t], dtype=float)
+        scale = 1.68 / _stature_of(motion)
+        origin = np.array([joints[:, 0].mean(), 0.0, joints[:, 2].mean()])
+        extras = {k: origin + (np.asarray(v[t]) - origin) * scale for k, v in motion.extras.items()}
+        frames.append(
+            render_training_frame(
+                origin + (joints - origin) * scale,
+                extras,
+                body,
+                CAM,
+                yaw=yaw,
+                distance=2.8,
+                camera_height=1.0,
+                aim_at_body=False,
+                noise=t == 90,
+                rng=rng,
+            )
+        )
+    accuracy, correct, total = label_accuracy(forest, frames)
+    assert accuracy >= 0.75
+    for side in ("left", "right"):
+        for part in ("upper_arm", "thigh"):
+            i = PART_NAMES.index(f"{side}_{part}")
+            assert correct[i] / total[i] > 0.5, (side, part)
+
+
+def _stature_of(motion) -> float:
+    from posedrift.labelling._train import _stature
+
+    return _stature(np.asarray(motion.joints[0], dtype=float))

@@ -1,0 +1,105 @@
+"""Metrics of Table 1 and ITOP against hand-computed values."""
+
+import numpy as np
+import pytest
+
+from posedrift.evaluation import (
+    angle_errors,
+    failed_frames,
+    fill_forward,
+    map_at,
+    markdown_table,
+    mpjpe_mm,
+)
+from posedrift.skeleton import ANGLE_NAMES, joint_angles, t_pose_joints
+
+
+def test_angle_errors_hand_computed():
+    ref = np.array([[90.0] * 8, [100.0] * 8, [110.0] * 8])
+    est = ref.copy()
+    est[:, 0] = [95.0, 90.0, 110.0]  # |5|, |-10|, 0 -> 5
+    est[1, 3] = np.nan  # right_shoulder: frames 0 and 2 only -> 0
+    est[:, 7] = ref[:, 7] + 3.0  # right_hip: 3
+    out = angle_errors(est, ref)
+    assert out["left_elbow"] == pytest.approx(5.0)
+    assert out["right_shoulder"] == pytest.approx(0.0)
+    assert out["right_hip"] == pytest.approx(3.0)
+    assert out["mean"] == pytest.approx((5.0 + 3.0) / 8)
+    assert list(out) == [*ANGLE_NAMES, "mean"]
+
+
+def test_angle_errors_identity_and_unknown():
+    ref = np.random.default_rng(0).uniform(0, 180, (10, 8))
+    assert angle_errors(ref, ref)["mean"] == 0.0
+    est = ref.copy()
+    est[:, 2] = np.nan
+    out = angle_errors(est, ref)
+    assert out["left_shoulder"] is None
+    assert out["mean"] == 0.0
+
+
+def test_mpjpe_and_map_hand_computed():
+    ref = np.tile(t_pose_joints(1.75), (4, 1, 1))
+    est = ref.copy()
+    est[0, :, 0] += 0.05  # 50 mm, within 10 cm
+    est[1, :, 1] += 0.20  # 200 mm, outside
+    est[2, 3] = np.nan  # one unknown joint: left out
+    # frames 0..3: 15 x 50 + 15 x 200 + 14 x 0 + 15 x 0 over 59 pairs
+    assert mpjpe_mm(est, ref) == pytest.approx((15 * 50 + 15 * 200) / 59)
+    # every joint: 1 miss in 4 frames, except left_shoulder: 1 miss in 3
+    expected = (14 * 0.75 + 2 / 3) / 15
+    assert map_at(est, ref) == pytest.approx(expected)
+    assert map_at(est, ref, threshold=0.3) == pytest.approx(1.0)
+    assert mpjpe_mm(ref, ref) == 0.0 and map_at(ref, ref) == 1.0
+
+
+def test_failed_frames_and_fill_forward():
+    joints = np.tile(t_pose_joints(1.75), (4, 1, 1))
+    joints[0] = np.nan
+    joints[2] = np.nan
+    joints[3, :, 0] += 0.1
+    assert failed_frames(joints).tolist() == [True, False, True, False]
+    filled = fill_forward(joints)
+    assert np.isnan(filled[0]).all()
+    np.testing.assert_array_equal(filled[2], joints[1])
+    np.testing.assert_array_equal(filled[3], joints[3])
+    # angles of a filled frame are those of the pose it copies
+    np.testing.assert_allclose(joint_angles(filled[2]), joint_angles(joints[1]))
+
+
+@pytest.mark.parametrize(
+    ("est", "ref", "match"),
+    [
+        (np.zeros((3, 7)), np.zeros((3, 7)), "must have shape \\(T, 8\\)"),
+        (np.zeros((3, 8)), np.zeros((4, 8)), "same number of frames"),
+    ],
+)
+def test_angle_errors_rejects_bad_shapes(est, ref, match):
+    with pytest.raises(ValueError, match=match):
+        angle_errors(est, ref)
+
+
+def test_joint_metrics_reject_bad_input():
+    with pytest.raises(ValueError, match="must have shape \\(T, 15, 3\\)"):
+        mpjpe_mm(np.zeros((2, 14, 3)), np.zeros((2, 14, 3)))
+    with pytest.raises(ValueError, match="positive distance"):
+        map_at(np.zeros((2, 15, 3)), np.zeros((2, 15, 3)), threshold=0.0)
+
+
+def test_markdown_table_layout():
+    row = {
+        "angle_error_deg": {**dict.fromkeys(ANGLE_NAMES, 2.0), "mean": 2.0},
+        "mpjpe_mm": 61.25,
+        "map_10cm": 0.8,
+        "label_accuracy": None,
+        "frames_per_second": 12.0,
+        "failed_frames": 3,
+    }
+    text = markdown_table(
+        {"protocol": "synthetic", "frames": 5, "sequences": ["x"], "methods": {"cpd": row}}
+    )
+    lines = text.splitlines()
+    assert lines[0].startswith("| Method | L elbow | R elbow | L shoulder | R shoulder | L knee")
+    assert "| cpd | 2.00 |" in lines[2] and "| 61.2 | 0.800 | 12.0 | 3 |" in lines[2]
+    assert any("paper: Kim et al. (CPD)" in line and "*6.26*" in line for line in lines)
+    assert "not comparable" in text

@@ -1,0 +1,326 @@
+"""Coherent Point Drift: ground truth, invariances, peers, edge cases and bad input."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from posedrift.points import sample_humanoid
+from posedrift.registration import (
+    ConvergenceWarning,
+    CPDResult,
+    register_affine,
+    register_nonrigid,
+    register_rigid,
+)
+from posedrift.registration import _estep
+from posedrift.skeleton import t_pose_joints
+
+
+def _rot(axis, deg):
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    a = np.radians(deg)
+    return np.eye(3) + np.sin(a) * k + (1 - np.cos(a)) * (k @ k)
+
+
+def _rms(a, b):
+    return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))))
+
+
+@pytest.fixture(scope="module")
+def body():
+    """300 points on a 1.75 m humanoid, metres."""
+    return sample_humanoid(t_pose_joints(1.75), 300, rng=1)
+
+
+def _smooth_warp(src):
+    """A smooth known warp: 8 degree turn, a 3 cm sinusoidal field, a 2 cm shift."""
+    return src @ _rot([0, 1, 0], 8).T + 0.03 * np.sin(2 * np.pi * src[:, [1, 2, 0]] / 1.5) + [
+        0.02,
+        0.0,
+        0.01,
+    ]
+
+
+def _with_outliers(points, share, rng):
+    rng = np.random.default_rng(rng)
+    k = int(round(share * len(points) / (1 - share)))
+    lo, hi = points.min(axis=0) - 0.1, points.max(axis=0) + 0.1
+    out = np.concatenate([points, rng.uniform(lo, hi, size=(k, points.shape[1]))])
+    return out[rng.permutation(len(out))]
+
+
+# --------------------------------------------------------------------------- ground truth
+def test_rigid_recovers_rotation_scale_translation(body):
+    rot = _rot([0.3, 1.0, 0.2], 25.0)
+    t = np.array([0.12, -0.05, 0.3])
+    target = 1.15 * body @ rot.T + t
+    res = register_rigid(body, target)
+    assert res.kind == "rigid" and res.converged
+    cos = (np.trace(res.rotation.T @ rot) - 1) / 2
+    assert np.degrees(np.arccos(np.clip(cos, -1, 1))) < 0.01
+    assert res.scale == pytest.approx(1.15, abs=1e-5)
+    np.testing.assert_allclose(res.translation, t, atol=1e-5)  # 0.01 mm
+    np.testing.assert_allclose(res.moved, target, atol=1e-5)
+    np.testing.assert_allclose(res.apply(body[:5]), target[:5], atol=1e-5)
+
+
+def test_rigid_without_scale_keeps_unit_scale(body):
+    target = body @ _rot([0, 0, 1], 10).T
+    res = register_rigid(body, target, scale=False)
+    assert res.scale == 1.0
+    np.testing.assert_allclose(res.moved, target, atol=1e-5)
+
+
+def test_affine_recovers_matrix(body):
+    b = np.array([[1.1, 0.05, 0.0], [0.0, 0.95, 0.1], [0.02, 0.0, 1.05]])
+    t = np.array([0.1, 0.2, -0.1])
+    res = register_affine(body, body @ b.T + t)
+    np.testing.assert_allclose(res.matrix, b, atol=1e-5)
+    np.testing.assert_allclose(res.translation, t, atol=1e-5)
+
+
+def test_nonrigid_recovers_smooth_warp_of_humanoid(body):
+    target = _smooth_warp(body)
+    assert _rms(body, target) > 0.03  # the motion is several centimetres
+    res = register_nonrigid(body, target, outlier_weight=0.0)
+    assert res.kind == "nonrigid" and res.converged
+    assert _rms(res.moved, target) < 1e-4  # 0.1 mm
+    assert np.abs(res.moved - target).max() < 5e-4
+    np.testing.assert_allclose(res.apply(body), res.moved, atol=1e-9)
+
+
+def test_nonrigid_with_20_percent_outliers(body):
+    truth = _smooth_warp(body)
+    target = _with_outliers(truth, 0.2, rng=3)
+    res = register_nonrigid(body, target, outlier_weight=0.2)
+    assert _rms(res.moved, truth) < 2e-3  # 2 mm
+    # the outlier model matters: without it the fit is pulled towards the outliers
+    plain = register_nonrigid(body, target, outlier_weight=0.0)
+    assert _rms(plain.moved, truth) > 5 * _rms(res.moved, truth)
+
+
+def test_rigid_with_20_percent_outliers(body):
+    rot = _rot([1, 1, 0], 15)
+    truth = body @ rot.T + [0.05, 0.0, 0.0]
+    res = register_rigid(body, _with_outliers(truth, 0.2, rng=4), outlier_weight=0.2)
+    assert _rms(res.moved, truth) < 2e-3
+
+
+@pytest.mark.parametrize("register", [register_rigid, register_affine, register_nonrigid])
+def test_identity_gives_no_motion(body, register):
+    res = register(body, body)
+    assert res.converged
+    np.testing.assert_allclose(res.moved, body, atol=1e-6)  # 1 micrometre
+    assert res.sigma2 < 1e-8
+
+
+@pytest.mark.parametrize("register", [register_rigid, register_affine, register_nonrigid])
+def test_scaling_both_sets_by_1000_changes_nothing(body, register):
+    target = _smooth_warp(body)[::-1]
+    a = register(body, target)
+    b = register(1000 * body, 1000 * target)
+    assert a.iterations == b.iterations
+    np.testing.assert_allclose(b.moved / 1000, a.moved, atol=1e-9)
+    assert b.sigma2 / 1e6 == pytest.approx(a.sigma2, rel=1e-6)
+
+
+def test_correspondence_and_label_transfer(body):
+    target = _smooth_warp(body)[::-1]  # reversed order: the answer is a permutation
+    res = register_nonrigid(body, target)
+    idx, prob = res.correspondence()
+    assert idx.shape == (len(target),) and prob.shape == (len(target),)
+    np.testing.assert_array_equal(idx, np.arange(len(body))[::-1])
+    assert np.all((prob > 0.5) & (prob <= 1.0))
+    labels = np.arange(len(body)) % 15
+    mass = res.transfer_labels(labels, 15)
+    assert mass.shape == (len(target), 15)
+    assert np.all(mass >= 0) and np.all(mass.sum(axis=1) <= 1 + 1e-12)
+    np.testing.assert_array_equal(mass.argmax(axis=1), labels[::-1])
+    with pytest.raises(ValueError, match="'labels'.*lie in"):
+        res.transfer_labels(labels + 1, 15)
+    with pytest.raises(ValueError, match="'labels'.*shape"):
+        res.transfer_labels(labels[:-1], 15)
+    with pytest.raises(ValueError, match="'n_labels'"):
+        res.transfer_labels(labels, 0)
+
+
+def test_warm_start_cuts_iterations_at_equal_accuracy(body):
+    rng = np.random.default_rng(11)
+    target = _smooth_warp(body) + rng.normal(scale=0.002, size=body.shape)  # 2 mm noise
+    moved_on = target + 0.01 * np.sin(2 * np.pi * target[:, [2, 0, 1]])  # a further 1 cm move
+    nxt = moved_on + rng.normal(scale=0.002, size=body.shape)
+    first = register_nonrigid(body, target)
+    cold = register_nonrigid(target, nxt)
+    warm = register_nonrigid(target, nxt, warm_start=first)
+    assert warm.iterations < cold.iterations
+    assert _rms(warm.moved, moved_on) < 3e-3 and _rms(cold.moved, moved_on) < 3e-3
+    assert _rms(warm.moved, moved_on) < 1.1 * _rms(cold.moved, moved_on)
+    rigid_prev = register_rigid(body, target)
+    rigid = register_rigid(body, target, warm_start=rigid_prev)
+    assert rigid.iterations <= 3
+
+
+def test_low_rank_and_float32_match_exact(body):
+    noise = np.random.default_rng(6).normal(scale=0.001, size=body.shape)  # 1 mm
+    target = _with_outliers(_smooth_warp(body) + noise, 0.1, rng=5)
+    exact = register_nonrigid(body, target)
+    low = register_nonrigid(body, target, low_rank=80)
+    single = register_nonrigid(body, target, dtype=np.float32)
+    assert _rms(low.moved, exact.moved) < 5e-4
+    assert _rms(single.moved, exact.moved) < 5e-4
+    assert low.kind == "nonrigid"
+    np.testing.assert_allclose(low.apply(body), low.moved, atol=2e-3)
+
+
+def test_max_iter_warns_and_flags(body):
+    with pytest.warns(ConvergenceWarning, match="max_iter=2"):
+        res = register_nonrigid(body, _smooth_warp(body), max_iter=2)
+    assert not res.converged and res.iterations == 2
+    assert issubclass(ConvergenceWarning, RuntimeWarning)
+
+
+# --------------------------------------------------------------------------- pycpd agreement
+@pytest.fixture(scope="module")
+def small_pair():
+    src = sample_humanoid(t_pose_joints(1.75), 120, rng=7)
+    noise = np.random.default_rng(9).normal(scale=0.003, size=src.shape)  # 3 mm
+    tgt = _with_outliers(_smooth_warp(src) + noise, 0.1, rng=8)
+    return src, tgt
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_agrees_with_pycpd_nonrigid(small_pair, compiled):
+    pycpd = pytest.importorskip("pycpd")
+    src, tgt = small_pair
+    reg = pycpd.DeformableRegistration(X=tgt, Y=src, alpha=2.0, beta=0.5, w=0.1,
+                                       tolerance=0.0, max_iterations=25)
+    moved, _ = reg.register()
+    with pytest.warns(ConvergenceWarning):
+        res = register_nonrigid(src, tgt, kernel_width=0.5, smoothness=2.0, outlier_weight=0.1,
+                                tol=0.0, max_iter=25, normalize=False, compiled=compiled)
+    np.testing.assert_allclose(res.moved, moved, atol=1e-8, rtol=0)
+    assert res.sigma2 == pytest.approx(reg.sigma2, rel=1e-8)
+
+
+def test_agrees_with_pycpd_rigid_and_affine(small_pair):
+    pycpd = pytest.importorskip("pycpd")
+    src, tgt = small_pair
+    tgt = tgt @ _rot([0, 1, 0], 20).T
+    reg = pycpd.RigidRegistration(X=tgt, Y=src, w=0.1, tolerance=0.0, max_iterations=30)
+    moved, (s, _r, _t) = reg.register()
+    with pytest.warns(ConvergenceWarning):
+        res = register_rigid(src, tgt, outlier_weight=0.1, tol=0.0, max_iter=30, normalize=False)
+    np.testing.assert_allclose(res.moved, moved, atol=1e-8, rtol=0)
+    assert res.scale == pytest.approx(s, rel=1e-8)
+    reg = pycpd.AffineRegistration(X=tgt, Y=src, w=0.1, tolerance=0.0, max_iterations=30)
+    moved, _ = reg.register()
+    with pytest.warns(ConvergenceWarning):
+        res = register_affine(src, tgt, outlier_weight=0.1, tol=0.0, max_iter=30, normalize=False)
+    np.testing.assert_allclose(res.moved, moved, atol=1e-8, rtol=0)
+
+
+# --------------------------------------------------------------------------- kernels
+@pytest.mark.skipif(not _estep.has_compiled_kernel(), reason="compiled E-step not built")
+@pytest.mark.parametrize("d", [2, 3, 4])
+def test_compiled_estep_matches_numpy_twin(d):
+    rng = np.random.default_rng(d)
+    x = rng.normal(size=(210, d))
+    t = rng.normal(size=(190, d))
+    for sigma2, c in [(1.0, 0.0), (0.05, 0.01), (1e-3, 1e-6)]:
+        ref = _estep.estep_numpy(x, t, sigma2, c)
+        for eps in (0.0, 1e-12):
+            got = _estep.estep(x, t, sigma2, c, truncate_eps=eps)
+            for a, b in zip(got[:3], ref[:3], strict=True):
+                np.testing.assert_allclose(a, b, atol=1e-10, rtol=1e-10)
+            assert got[3] == pytest.approx(ref[3], rel=1e-12, abs=1e-9)
+
+
+def test_numpy_estep_blocks_agree(monkeypatch):
+    rng = np.random.default_rng(0)
+    x, t = rng.normal(size=(300, 3)), rng.normal(size=(50, 3))
+    whole = _estep.estep_numpy(x, t, 0.3, 0.01)
+    monkeypatch.setattr(_estep, "_BLOCK_ELEMENTS", 1000)  # 20 target points per block
+    blocked = _estep.estep_numpy(x, t, 0.3, 0.01)
+    for a, b in zip(whole[:3], blocked[:3], strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-14)
+
+
+# --------------------------------------------------------------------------- edge cases
+@pytest.mark.parametrize("register", [register_rigid, register_affine, register_nonrigid])
+def test_one_point_each(register):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        res = register([[0.0, 0.0, 0.0]], [[0.1, 0.2, 0.3]])
+    assert np.all(np.isfinite(res.moved)) and res.moved.shape == (1, 3)
+    if register is not register_affine:  # affine is under-determined by one point
+        np.testing.assert_allclose(res.moved, [[0.1, 0.2, 0.3]], atol=1e-3)
+
+
+@pytest.mark.parametrize("register", [register_rigid, register_affine, register_nonrigid])
+def test_coincident_points(register):
+    same = np.ones((20, 3))
+    res = register(same, same)
+    assert np.all(np.isfinite(res.moved)) and np.isfinite(res.sigma2)
+    np.testing.assert_allclose(res.moved, same, atol=1e-9)
+    # duplicated source points onto a spread target: finite, no NaN
+    rng = np.random.default_rng(0)
+    src = np.repeat(rng.normal(size=(10, 3)), 3, axis=0)
+    res = register(src, src[::3] + 0.01)
+    assert np.all(np.isfinite(res.moved))
+
+
+@pytest.mark.parametrize("register", [register_rigid, register_affine, register_nonrigid])
+def test_bad_input(register, body):
+    name = register.__name__
+    with pytest.raises(ValueError, match=rf"'source' argument of {name}.*at least 1"):
+        register(np.empty((0, 3)), body)
+    with pytest.raises(ValueError, match="'target'.*at least 1"):
+        register(body, np.empty((0, 3)))
+    bad = body.copy()
+    bad[3, 1] = np.nan
+    with pytest.raises(ValueError, match="'target'.*finite"):
+        register(body, bad)
+    with pytest.raises(ValueError, match="'source'.*finite"):
+        register(np.where(bad == bad, bad, np.inf), body)
+    with pytest.raises(ValueError, match="'source'.*2-D"):
+        register(body.ravel(), body)
+    with pytest.raises(ValueError, match="same number of columns"):
+        register(body, body[:, :2])
+    with pytest.raises(ValueError, match=r"'outlier_weight'.*\[0, 1\)"):
+        register(body, body, outlier_weight=1.0)
+    with pytest.raises(ValueError, match="'tol'"):
+        register(body, body, tol=-1.0)
+    with pytest.raises(ValueError, match="'max_iter'.*int"):
+        register(body, body, max_iter=2.5)
+    with pytest.raises(ValueError, match="'dtype'"):
+        register(body, body, dtype=np.int32)
+    with pytest.raises(ValueError, match="'warm_start'.*CPDResult"):
+        register(body, body, warm_start="previous")
+    with pytest.raises(ValueError, match="'source'.*numeric"):
+        register([["a", "b", "c"]], body)
+
+
+def test_bad_nonrigid_parameters(body):
+    with pytest.raises(ValueError, match=r"'kernel_width' parameter of register_nonrigid.*-1"):
+        register_nonrigid(body, body, kernel_width=-1)
+    with pytest.raises(ValueError, match="'smoothness'"):
+        register_nonrigid(body, body, smoothness=0.0)
+    with pytest.raises(ValueError, match="'low_rank'"):
+        register_nonrigid(body, body, low_rank=0)
+    res2d = register_rigid(body[:, :2], body[:, :2])
+    with pytest.raises(ValueError, match="'warm_start'.*2-D"):
+        register_nonrigid(body, body, warm_start=res2d)
+    res = register_nonrigid(body, body)
+    with pytest.raises(ValueError, match="'points' argument of apply.*3 columns"):
+        res.apply(body[:, :2])
+    assert isinstance(res, CPDResult)
+
+
+def test_result_is_frozen(body):
+    res = register_rigid(body, body)
+    with pytest.raises(AttributeError):
+        res.sigma2 = 1.0  # type: ignore[misc]
