@@ -25,13 +25,25 @@ What it does
    vertices) with the definitions the motion-capture mapping uses, and the extra
    points (head top, middle-finger tips, toe tips) from the skin itself.
 4. Maps the rig's skinning weights (``weights.cmu_mb.json``, 31 bones) onto the 15
-   body parts, giving smooth per-part skinning weights and one part per vertex (the
-   dominant part, cleaned so that every part is one connected patch).
-5. Decimates the skin (quadric edge collapse) to about ``--triangles`` triangles and
-   carries weights and morph deltas over to the kept vertices (nearest source vertex).
-6. Stores shape morphs (differences of MakeHuman macro targets) on the decimated
-   vertices, converts to metres in the product's world frame (+Y up, soles at y = 0,
-   pelvis centre at x = z = 0, facing +Z) and writes the ``.npz`` plus the licence note.
+   body parts (``BONE_TO_PART``), smooths them a little (``--smooth`` passes of a
+   mesh Laplacian) into per-part skinning weights, and gives each vertex the dominant
+   part of more strongly smoothed weights (``--part-smooth``); upper and lower torso
+   are split by a horizontal cut at the rig's ``Spine`` bone head (about the lowest
+   ribs); stray islands are merged so that every part is one connected patch.
+5. Decimates the skin (quadric edge collapse, ``fast-simplification``) to about
+   ``--triangles`` triangles, drops back-to-back triangle pairs the collapse may leave,
+   checks that the result is a closed manifold, and carries weights, parts and morph
+   deltas over to the kept vertices (nearest source vertex). It prints the
+   intersection over union of the front and side silhouettes before and after
+   (0.996 and 0.997 at 7,000 triangles).
+6. Stores shape morphs (differences of MakeHuman macro and modifier targets) on the
+   decimated vertices, with the matching joint displacements, converts to metres in
+   the product's world frame (+Y up, soles at y = 0, pelvis centre at x = z = 0,
+   facing +Z) and writes the ``.npz`` plus ``BODY_MODEL_LICENSE.md``.
+
+``--preview DIR`` also writes ``silhouette_decimation.png`` (the two silhouettes
+overlaid) and ``body_parts.png`` (front, side and back views coloured by part; the copy
+in ``docs/images/body_parts.png`` comes from it).
 """
 
 from __future__ import annotations
@@ -275,6 +287,16 @@ def smooth_weights(w: np.ndarray, tris: np.ndarray, iterations: int) -> np.ndarr
     return w / w.sum(axis=1, keepdims=True)
 
 
+def check_closed_manifold(tris: np.ndarray) -> None:
+    """Raise unless every edge joins exactly two triangles with opposite directions."""
+    directed = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    if len(np.unique(directed, axis=0)) != len(directed):
+        raise ValueError("decimated mesh has an edge used twice in the same direction")
+    _, counts = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)
+    if np.any(counts != 2):
+        raise ValueError(f"decimated mesh has {np.sum(counts != 2)} non-manifold edges")
+
+
 def decimate(points: np.ndarray, tris: np.ndarray, n_triangles: int):
     import fast_simplification
 
@@ -282,10 +304,15 @@ def decimate(points: np.ndarray, tris: np.ndarray, n_triangles: int):
     p2, t2 = fast_simplification.simplify(
         points.astype(np.float32), tris.astype(np.int32), target_reduction=reduction, agg=7
     )
+    # Edge collapse can leave a back-to-back pair of triangles (a fin): drop both.
+    _, inverse, counts = np.unique(np.sort(t2, axis=1), axis=0, return_inverse=True,
+                                   return_counts=True)  # fmt: skip
+    t2 = t2[counts[inverse.ravel()] == 1]
     # Drop vertices no triangle uses.
     used = np.unique(t2)
     remap = -np.ones(len(p2), dtype=np.int64)
     remap[used] = np.arange(len(used))
+    check_closed_manifold(remap[t2])
     return p2[used].astype(float), remap[t2]
 
 
@@ -516,7 +543,7 @@ def main(argv: list[str] | None = None) -> int:
     buf = io.BytesIO()
     np.savez_compressed(buf, **out)
     args.out.write_bytes(buf.getvalue())
-    OUT_LICENSE.write_text(LICENSE_TEXT.format(sha=WHEEL_SHA256))
+    (args.out.parent / OUT_LICENSE.name).write_text(LICENSE_TEXT.format(sha=WHEEL_SHA256))
     print(
         f"wrote {args.out} ({len(buf.getvalue()) / 1e6:.2f} MB): {len(dpts)} vertices, "
         f"{len(dtris)} triangles (from {nb} / {len(tris)}), stature "

@@ -34,8 +34,25 @@ def test_cli_bench_cpd_writes_json_and_markdown(tmp_path):
     md = tmp_path / "cpd.md"
     result = CliRunner().invoke(
         app,
-        ["-q", "bench", "cpd", "--sizes", "60", "--threads", "1", "--repeats", "1",
-         "--frame-points", "60", "--impls", "posedrift,posedrift-lowrank100,cpd-pytorch", "--json", str(out), "--markdown", str(md)],
+        [
+            "-q",
+            "bench",
+            "cpd",
+            "--sizes",
+            "60",
+            "--threads",
+            "1",
+            "--repeats",
+            "1",
+            "--frame-points",
+            "60",
+            "--impls",
+            "posedrift,posedrift-lowrank100,cpd-pytorch",
+            "--json",
+            str(out),
+            "--markdown",
+            str(md),
+        ],
     )
     assert result.exit_code == 0, result.output
     report = json.loads(out.read_text())

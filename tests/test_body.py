@@ -400,3 +400,14 @@ def test_parts_start_at_their_joints(body: BodyModel) -> None:
     upper = v[parts == PART_INDEX["upper_torso"], 1].min()
     torso_y = body.rest_joints[J["torso"], 1]
     assert torso_y - 0.12 < upper < torso_y
+
+
+def test_mesh_is_closed_and_outward(body: BodyModel) -> None:
+    f = body.faces
+    directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    assert len(np.unique(directed, axis=0)) == len(directed)
+    _, counts = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)
+    assert np.all(counts == 2)  # watertight, manifold
+    v = body.vertices
+    volume = np.einsum("ij,ij->i", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])).sum() / 6
+    assert 0.05 < volume < 0.09  # m^3, counter-clockwise seen from outside (~60-75 kg)

@@ -7,7 +7,7 @@ import pytest
 
 from posedrift.camera import Intrinsics
 from posedrift.labelling import depth_features
-from posedrift.labelling._features import pair_features, pixel_terms, probe_image, scaled_offsets
+from posedrift.labelling._features import pair_features, pixel_terms, probe_image
 
 CAM = Intrinsics(fx=100.0, fy=100.0, cx=3.0, cy=2.5, width=6, height=5)
 
@@ -79,10 +79,9 @@ def test_per_pixel_kernel_equals_the_training_matrix_bitwise():
     offsets = rng.uniform(-150, 150, size=(64, 4))
     matrix = depth_features(depth, pixels, offsets, intrinsics=cam, mask=mask)
     image = probe_image(depth, mask, 10.0)
-    r, c, inv = pixel_terms(depth, pixels)
-    scaled = scaled_offsets(offsets, cam, 285.63)
+    terms = pixel_terms(depth, pixels, cam, 285.63)
     choice = rng.integers(len(offsets), size=len(pixels))
-    single = pair_features(image, depth.shape, r, c, inv, scaled[choice])
+    single = pair_features(image, depth.shape, *terms, offsets.astype(np.float32)[choice])
     np.testing.assert_array_equal(single, matrix[np.arange(len(pixels)), choice])
 
 

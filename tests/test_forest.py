@@ -252,7 +252,9 @@ def test_offset_bank_and_pixel_sampling_are_seeded():
     assert np.mean(np.all(a[:, 2:] == 0, axis=1)) > 0.05
     frame = toy_frame(np.random.default_rng(0))
     p = sample_pixels(frame.labels, frame.mask, 500, balance=1.0, rng=0)
-    np.testing.assert_array_equal(p, sample_pixels(frame.labels, frame.mask, 500, balance=1.0, rng=0))
+    np.testing.assert_array_equal(
+        p, sample_pixels(frame.labels, frame.mask, 500, balance=1.0, rng=0)
+    )
     assert frame.mask[p[:, 0], p[:, 1]].all() and len(np.unique(p, axis=0)) == 500
     # Balanced sampling: the hands are drawn far more often than their pixel share.
     counts = np.bincount(frame.labels[p[:, 0], p[:, 1]], minlength=16)[1:]

@@ -230,12 +230,53 @@ def test_mat_in_utd_layout(tmp_path):
 
     stack = _depth_stack(3)
     savemat(tmp_path / "a1_s1_t1_depth.mat", {"d_depth": np.moveaxis(stack, 0, -1)})
-    frames = list(open_depth_source(tmp_path / "a1_s1_t1_depth.mat"))
-    assert len(frames) == 3
-    np.testing.assert_allclose(frames[1].depth, stack[1] / 1000.0, atol=1e-6)
+    source = open_depth_source(tmp_path / "a1_s1_t1_depth.mat")
+    frames = list(source)
+    assert len(frames) == 3 and source.unmirror  # UTD-MHAD images are mirrored
+    np.testing.assert_allclose(frames[1].depth, stack[1][:, ::-1] / 1000.0, atol=1e-6)
+    assert source.intrinsics.cx == 319 - 160.0
+    raw = open_depth_source(tmp_path / "a1_s1_t1_depth.mat", unmirror=False)
+    np.testing.assert_allclose(next(iter(raw)).depth, stack[0] / 1000.0, atol=1e-6)
+    assert raw.intrinsics.cx == 160.0
     savemat(tmp_path / "other.mat", {"d_skel": np.zeros((20, 3, 2))})
     with pytest.raises(ValueError, match=r"other\.mat.*'d_depth'.*Variables found: d_skel"):
         open_depth_source(tmp_path / "other.mat")
+
+
+def test_unmirror_mirrors_the_geometry(tmp_path):
+    from posedrift.camera import backproject
+
+    stack = _depth_stack(1)
+    np.save(tmp_path / "s.npy", stack)
+    plain = next(iter(open_depth_source(tmp_path / "s.npy", intrinsics="280,285,150,118")))
+    flipped_source = open_depth_source(
+        tmp_path / "s.npy", intrinsics="280,285,150,118", unmirror=True
+    )
+    flipped = next(iter(flipped_source))
+    assert flipped_source.intrinsics.cx == 319 - 150.0
+    a, _ = backproject(plain.depth, plain.intrinsics)
+    b, _ = backproject(flipped.depth, flipped.intrinsics)
+    # the flipped frame back-projects to the mirror image (x -> -x) of the raw one
+    key = np.lexsort(a.T)
+    mirrored = b * [-1.0, 1.0, 1.0]
+    np.testing.assert_allclose(mirrored[np.lexsort(mirrored.T)], a[key], atol=1e-9)
+
+
+@pytest.mark.data
+def test_real_utd_sequence_matches_the_evaluation_loader(utd_dir):
+    from posedrift.evaluation import load_utd_sequence
+
+    depth = utd_dir / "Depth" / "a5_s2_t1_depth.mat"
+    skeleton = utd_dir / "Skeleton" / "a5_s2_t1_skeleton.mat"
+    if not (depth.exists() and skeleton.exists()):
+        pytest.skip(f"{depth} not found")
+    sequence = load_utd_sequence(depth, skeleton)
+    source = open_depth_source(depth)
+    frames = list(source)
+    assert source.intrinsics == sequence.frames[0].intrinsics
+    assert len(frames) == len(sequence.frames)
+    for ours, theirs in zip(frames, sequence.frames, strict=True):
+        np.testing.assert_array_equal(ours.depth, theirs.depth)
 
 
 @pytest.mark.data

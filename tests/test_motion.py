@@ -243,8 +243,10 @@ def test_development_clips_load_map_and_sit_in_the_world_frame(mocap_dir):
         np.testing.assert_allclose(_facing(j0), [0.0, 0.0, 1.0], atol=1e-9)
         assert j0[J["left_hip"], 0] > j0[J["right_hip"], 0]  # the person's left is +X
         # Floor: the lower ankle of frame 0 at 3.9 % of stature, or a toe on the floor.
-        lowest = min(m.extras["left_toe"][0, 1], m.extras["right_toe"][0, 1])
-        assert lowest >= -1e-9
+        lowest = np.minimum(m.extras["left_toe"][:, 1], m.extras["right_toe"][:, 1])
+        assert lowest[0] >= -1e-9 and np.percentile(lowest, 5) >= -1e-9
+        if m.name == "001_14":  # starts hanging from the monkey bars: the floor is below
+            assert lowest[0] > 1.0 and np.percentile(lowest, 5) < 0.05
         # Toes point forward (per frame, relative to the body).
         toes = m.extras["left_toe"] - m.joints[:, J["left_foot"]]
         r2l = m.joints[:, J["left_hip"]] - m.joints[:, J["right_hip"]]

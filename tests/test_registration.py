@@ -11,11 +11,11 @@ from posedrift.points import sample_humanoid
 from posedrift.registration import (
     ConvergenceWarning,
     CPDResult,
+    _estep,
     register_affine,
     register_nonrigid,
     register_rigid,
 )
-from posedrift.registration import _estep
 from posedrift.skeleton import t_pose_joints
 
 
@@ -38,16 +38,13 @@ def body():
 
 def _smooth_warp(src):
     """A smooth known warp: 8 degree turn, a 3 cm sinusoidal field, a 2 cm shift."""
-    return src @ _rot([0, 1, 0], 8).T + 0.03 * np.sin(2 * np.pi * src[:, [1, 2, 0]] / 1.5) + [
-        0.02,
-        0.0,
-        0.01,
-    ]
+    field = 0.03 * np.sin(2 * np.pi * src[:, [1, 2, 0]] / 1.5)
+    return src @ _rot([0, 1, 0], 8).T + field + np.array([0.02, 0.0, 0.01])
 
 
 def _with_outliers(points, share, rng):
     rng = np.random.default_rng(rng)
-    k = int(round(share * len(points) / (1 - share)))
+    k = round(share * len(points) / (1 - share))
     lo, hi = points.min(axis=0) - 0.1, points.max(axis=0) + 0.1
     out = np.concatenate([points, rng.uniform(lo, hi, size=(k, points.shape[1]))])
     return out[rng.permutation(len(out))]
@@ -196,12 +193,22 @@ def small_pair():
 def test_agrees_with_pycpd_nonrigid(small_pair, compiled):
     pycpd = pytest.importorskip("pycpd")
     src, tgt = small_pair
-    reg = pycpd.DeformableRegistration(X=tgt, Y=src, alpha=2.0, beta=0.5, w=0.1,
-                                       tolerance=0.0, max_iterations=25)
+    reg = pycpd.DeformableRegistration(
+        X=tgt, Y=src, alpha=2.0, beta=0.5, w=0.1, tolerance=0.0, max_iterations=25
+    )
     moved, _ = reg.register()
     with pytest.warns(ConvergenceWarning):
-        res = register_nonrigid(src, tgt, kernel_width=0.5, smoothness=2.0, outlier_weight=0.1,
-                                tol=0.0, max_iter=25, normalize=False, compiled=compiled)
+        res = register_nonrigid(
+            src,
+            tgt,
+            kernel_width=0.5,
+            smoothness=2.0,
+            outlier_weight=0.1,
+            tol=0.0,
+            max_iter=25,
+            normalize=False,
+            compiled=compiled,
+        )
     np.testing.assert_allclose(res.moved, moved, atol=1e-8, rtol=0)
     assert res.sigma2 == pytest.approx(reg.sigma2, rel=1e-8)
 

@@ -50,16 +50,23 @@ def bench_cpd_command(
         size_list = [int(s) for s in sizes.split(",") if s.strip()]
         thread_list = [None if t.strip() == "all" else int(t) for t in threads.split(",")]
     except ValueError as exc:
-        raise fail(f"--sizes and --threads take comma-separated integers ('all' for threads): "
-                   f"{exc}") from exc
+        raise fail(
+            f"--sizes and --threads take comma-separated integers ('all' for threads): {exc}"
+        ) from exc
     if not size_list or min(size_list) < 10:
         raise fail(f"--sizes must list sizes of at least 10 points. Got {sizes!r}.")
     if any(t is not None and t < 1 for t in thread_list):
         raise fail(f"--threads must be positive or 'all'. Got {threads!r}.")
     say = (lambda msg: typer.echo(f"  {msg}", err=True)) if progress_enabled() else None
-    report = run_cpd_benchmark(size_list, threads=thread_list, repeats=repeats, rng=seed,
-                               progress=say, frame_points=frame_points,
-                               only=None if impls is None else impls.split(","))
+    report = run_cpd_benchmark(
+        size_list,
+        threads=thread_list,
+        repeats=repeats,
+        rng=seed,
+        progress=say,
+        frame_points=frame_points,
+        only=None if impls is None else impls.split(","),
+    )
     table = markdown_table(report)
     typer.echo(table)
     if json_out is not None:

@@ -33,7 +33,9 @@ def train(
         list[str] | None,
         typer.Option("--exclude", help="Glob of BVH file names to hold out (repeatable)."),
     ] = None,
-    pixels: Annotated[int, typer.Option("--pixels", min=1, help="Pixels sampled per frame.")] = 1500,
+    pixels: Annotated[
+        int, typer.Option("--pixels", min=1, help="Pixels sampled per frame.")
+    ] = 1500,
     offsets: Annotated[int, typer.Option("--offsets", min=1, help="Candidate offset pairs.")] = 500,
     trees: Annotated[int, typer.Option("--trees", min=1, help="Number of trees.")] = 3,
     depth: Annotated[int, typer.Option("--depth", min=1, max=64, help="Tree depth.")] = 20,
@@ -45,6 +47,10 @@ def train(
         bool, typer.Option("--extra-trees/--random-forest", help="Random thresholds (faster).")
     ] = False,
     jobs: Annotated[int, typer.Option("--jobs", min=1, help="Threads for fitting.")] = 2,
+    procedural_share: Annotated[
+        float,
+        typer.Option("--procedural-share", min=0.0, max=1.0, help="Share of procedural poses."),
+    ] = 0.2,
 ) -> None:
     """Train a body-part forest on rendered synthetic depth frames (needs scikit-learn).
 
@@ -74,14 +80,17 @@ def train(
         render_rng, fit_rng = (
             np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2)
         )
-        generator = tr.synthetic_training_frames(frames, motions, rng=render_rng)
+        n_clips = len(motions) - 1
+        share = procedural_share if n_clips else 1.0
+        weights = [(1.0 - share) / max(n_clips, 1)] * n_clips + [share]
+        generator = tr.synthetic_training_frames(frames, motions, weights=weights, rng=render_rng)
         metadata = {
             "command": "posedrift train",
             "seed": seed,
             "frames": frames,
             "clips": [p.name for p in paths],
             "excluded": exclude,
-            "procedural": True,
+            "procedural_share": share,
         }
         with tr._progress(progress_enabled(), "rendering + features", frames) as advance:
             forest = tr.train_forest(

@@ -43,6 +43,13 @@ def view(
     fps: Annotated[
         float, typer.Option("--fps", min=0.001, help="Frame rate where the input has none.")
     ] = 30.0,
+    unmirror: Annotated[
+        bool | None,
+        typer.Option(
+            "--unmirror/--no-unmirror",
+            help="Flip mirrored recordings left-right (default: only UTD-MHAD .mat files).",
+        ),
+    ] = None,
     strict: Annotated[
         bool,
         typer.Option("--strict", help="Exit with status 1 when any frame is unreadable."),
@@ -64,7 +71,12 @@ def view(
 
     try:
         reader = open_depth_source(
-            source, camera=camera, intrinsics=intrinsics, depth_scale=depth_scale, fps=fps
+            source,
+            camera=camera,
+            intrinsics=intrinsics,
+            depth_scale=depth_scale,
+            fps=fps,
+            unmirror=unmirror,
         )
         total = len(reader)
     except (FileNotFoundError, ValueError, ImportError) as exc:
@@ -98,6 +110,8 @@ def view(
         f"camera     {k.width} x {k.height}, fx {k.fx:g}, fy {k.fy:g}, cx {k.cx:g}, cy {k.cy:g}"
     )
     typer.echo(f"depth      {reader.depth_scale:g} units per metre")
+    if reader.unmirror:
+        typer.echo("mirrored   yes: frames flipped left-right, cx adjusted")
     if coverage:
         typer.echo(
             f"range      {nearest:.3f} - {farthest:.3f} m; "

@@ -385,7 +385,14 @@ def evaluate(
         "mpjpe_mm", "map_10cm", "label_accuracy", "frames_per_second",
         "failed_frames", ...}}}`` (see :func:`summarize`).
     """
-    run = run_methods(sequences, methods, forest=forest, progress=progress, protocol=protocol)
+    run = run_methods(
+        sequences,
+        methods,
+        forest=forest,
+        progress=progress,
+        protocol=protocol,
+        keep_frames=figures_dir is not None,
+    )
     report = summarize(run)
     if figures_dir is not None:
         from posedrift.evaluation._figures import write_figures

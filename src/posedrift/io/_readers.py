@@ -187,15 +187,40 @@ class DepthSource:
         Depth units per metre of the raw data.
     fps : float
         Frame rate used for timestamps where the input has none.
+    unmirror : bool
+        Whether frames are flipped left-right (mirrored recordings such as
+        UTD-MHAD); ``intrinsics`` then describe the flipped image.
     """
 
     path: Path
     intrinsics: Intrinsics
     depth_scale: float
     fps: float
+    unmirror: bool = False
 
     def __len__(self) -> int:
         raise NotImplementedError
+
+    def _set_unmirror(self, unmirror: bool) -> None:
+        """Flip frames left-right (for mirrored recordings) and adjust ``cx`` to match."""
+        self.unmirror = bool(unmirror)
+        if self.unmirror:
+            k = self.intrinsics
+            self.intrinsics = Intrinsics(
+                fx=k.fx, fy=k.fy, cx=(k.width - 1) - k.cx, cy=k.cy, width=k.width, height=k.height
+            )
+
+    def _frame(self, raw: np.ndarray, *, index: int, timestamp: float, source: str) -> DepthFrame:
+        if self.unmirror:
+            raw = np.ascontiguousarray(np.asarray(raw)[:, ::-1])
+        return DepthFrame.from_raw(
+            raw,
+            self.intrinsics,
+            depth_scale=self.depth_scale,
+            index=index,
+            timestamp=timestamp,
+            source=source,
+        )
 
     def __iter__(self) -> Iterator[DepthFrame | UnreadableFrame]:
         raise NotImplementedError
@@ -243,6 +268,7 @@ class PngFolderSource(DepthSource):
         intrinsics: Intrinsics | str | Sequence[float] | None = None,
         depth_scale: float | str | None = None,
         fps: float = DEFAULT_FPS,
+        unmirror: bool = False,
     ) -> None:
         folder = Path(path)
         files = sorted(
@@ -294,6 +320,7 @@ class PngFolderSource(DepthSource):
         self.intrinsics = resolve_intrinsics(
             self._shape, camera=camera, intrinsics=intrinsics, where=str(folder)
         )
+        self._set_unmirror(unmirror)
         self._timestamps = self._name_timestamps()
 
     def _name_timestamps(self) -> np.ndarray | None:
@@ -342,14 +369,7 @@ class PngFolderSource(DepthSource):
                 yield UnreadableFrame(i, str(file), f"cannot read this PNG: {exc}")
                 continue
             stamp = float(self._timestamps[i]) if self._timestamps is not None else i / self.fps
-            yield DepthFrame.from_raw(
-                raw,
-                self.intrinsics,
-                depth_scale=self.depth_scale,
-                index=i,
-                timestamp=stamp,
-                source=str(file),
-            )
+            yield self._frame(raw, index=i, timestamp=stamp, source=str(file))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -374,6 +394,7 @@ class ArraySource(DepthSource):
         fps: float = DEFAULT_FPS,
         timestamps: np.ndarray | None = None,
         record: str = "",
+        unmirror: bool = False,
     ) -> None:
         self.path = Path(path)
         stack = np.asarray(stack) if not isinstance(stack, np.memmap) else stack
@@ -399,6 +420,7 @@ class ArraySource(DepthSource):
         self.intrinsics = resolve_intrinsics(
             stack.shape[1:], camera=camera, intrinsics=intrinsics, where=str(self.path)
         )
+        self._set_unmirror(unmirror)
         if timestamps is not None:
             timestamps = np.asarray(timestamps, dtype=float).reshape(-1)
             if len(timestamps) != len(stack):
@@ -420,14 +442,7 @@ class ArraySource(DepthSource):
                 yield UnreadableFrame(i, source, str(exc))
                 continue
             stamp = float(self.timestamps[i]) if self.timestamps is not None else i / self.fps
-            yield DepthFrame.from_raw(
-                raw,
-                self.intrinsics,
-                depth_scale=self.depth_scale,
-                index=i,
-                timestamp=stamp,
-                source=source,
-            )
+            yield self._frame(raw, index=i, timestamp=stamp, source=source)
 
 
 def _open_npy(path: Path, **options) -> ArraySource:
@@ -492,6 +507,9 @@ def _open_mat(path: Path, **options) -> ArraySource:
     data = loadmat(path, variable_names=[key])[key]
     if data.ndim == 3:
         data = np.moveaxis(data, -1, 0)  # UTD-MHAD stores height x width x frames
+    if options.get("unmirror") is None:
+        # UTD-MHAD's depth images are mirrored (the person's left arm on the image's left)
+        options["unmirror"] = key == "d_depth"
     return ArraySource(path, data, record=f":{key}", **options)
 
 
@@ -505,6 +523,7 @@ def open_depth_source(
     intrinsics: Intrinsics | str | Sequence[float] | None = None,
     depth_scale: float | str | None = None,
     fps: float = DEFAULT_FPS,
+    unmirror: bool | None = None,
 ) -> DepthSource:
     """Open a depth recording, choosing the reader by its suffix (or a folder).
 
@@ -529,6 +548,12 @@ def open_depth_source(
         read as metres unless this is given; RealSense recordings carry their own.
     fps : float
         Frame rate for timestamps (``index / fps``) where the input gives none.
+    unmirror : bool, optional
+        Flip every frame left-right and set ``cx' = (width - 1) - cx``, for mirrored
+        recordings (the person's left arm on the image's left), so that right and left
+        come out as the person's own. By default True for UTD-MHAD ``.mat`` files
+        (``d_depth``, which are mirrored), False otherwise. Camera presets and
+        ``intrinsics`` describe the raw, unflipped images.
 
     Returns
     -------
@@ -564,15 +589,16 @@ def open_depth_source(
     if not (np.isfinite(fps) and fps > 0):
         raise ValueError(f"The 'fps' option must be a positive frame rate. Got {fps!r} instead.")
     options = {"camera": camera, "intrinsics": intrinsics, "depth_scale": depth_scale, "fps": fps}
+    suffix = path.suffix.lower()
+    if suffix == ".mat" and not path.is_dir():
+        return _open_mat(path, unmirror=unmirror, **options)
+    options["unmirror"] = bool(unmirror)
     if path.is_dir():
         return PngFolderSource(path, **options)
-    suffix = path.suffix.lower()
     if suffix == ".npy":
         return _open_npy(path, **options)
     if suffix == ".npz":
         return _open_npz(path, **options)
-    if suffix == ".mat":
-        return _open_mat(path, **options)
     if suffix in (".bag", ".db3"):
         from posedrift.io._realsense import RealSenseSource
 

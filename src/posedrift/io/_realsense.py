@@ -44,6 +44,7 @@ class RealSenseSource(DepthSource):
         intrinsics: Intrinsics | str | Sequence[float] | None = None,
         depth_scale: float | str | None = None,
         fps: float = DEFAULT_FPS,
+        unmirror: bool = False,
     ) -> None:
         self.path = Path(path)
         rs = _import_realsense()
@@ -76,6 +77,7 @@ class RealSenseSource(DepthSource):
             self.intrinsics = resolve_intrinsics(
                 (own.height, own.width), camera=camera, intrinsics=intrinsics, where=str(self.path)
             )
+        self._set_unmirror(unmirror)
         self._length: int | None = None
 
     def _start(self, rs):
@@ -136,12 +138,5 @@ class RealSenseSource(DepthSource):
                 why = message or f"depth of shape {None if raw is None else raw.shape}"
                 yield UnreadableFrame(index, source, why)
                 continue
-            yield DepthFrame.from_raw(
-                raw,
-                self.intrinsics,
-                depth_scale=self.depth_scale,
-                index=index,
-                timestamp=stamp,
-                source=source,
-            )
+            yield self._frame(raw, index=index, timestamp=stamp, source=source)
         self._length = count

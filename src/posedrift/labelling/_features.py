@@ -55,9 +55,12 @@ def probe_image(depth: np.ndarray, mask: np.ndarray, background: float) -> np.nd
 
 
 def pixel_terms(
-    depth: np.ndarray, pixels: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per-pixel terms of the feature: shifted row and column, and ``1 / d(x)``.
+    depth: np.ndarray,
+    pixels: np.ndarray,
+    intrinsics: Intrinsics,
+    reference_focal: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per-pixel terms of the feature: shifted row and column, and the offset scales.
 
     Parameters
     ----------
@@ -65,32 +68,25 @@ def pixel_terms(
         Depth in metres; every listed pixel must have a positive depth.
     pixels : (N, 2) int
         ``(row, column)`` of each pixel.
+    intrinsics : Intrinsics
+        The camera (its focal lengths scale the offsets).
+    reference_focal : float
+        Focal length (pixels) at which offsets are expressed.
 
     Returns
     -------
     rows, cols : (N,) float32
         ``row + 1.5`` and ``column + 1.5`` (border shift and rounding half-up folded in).
-    inverse_depth : (N,) float32
-        ``1 / d(x)`` in 1/metres.
+    row_scale, col_scale : (N,) float32
+        ``(fy / f_ref) / d(x)`` and ``(fx / f_ref) / d(x)``: pixels per (pixel x metre)
+        of offset, in 1/metres.
     """
     rows = pixels[:, 0].astype(np.float32) + np.float32(1.5)
     cols = pixels[:, 1].astype(np.float32) + np.float32(1.5)
-    inverse_depth = np.float32(1.0) / depth[pixels[:, 0], pixels[:, 1]].astype(np.float32)
-    return rows, cols, inverse_depth
-
-
-def scaled_offsets(
-    offsets: np.ndarray, intrinsics: Intrinsics, reference_focal: float
-) -> np.ndarray:
-    """Offsets ``(K, 4)`` in pixel x metres at ``intrinsics``' focal lengths, float32.
-
-    Columns are ``(u_row, u_col, v_row, v_col)``: rows scale by ``fy / f_ref``,
-    columns by ``fx / f_ref``.
-    """
-    scale = np.array(
-        [intrinsics.fy, intrinsics.fx, intrinsics.fy, intrinsics.fx], dtype=np.float64
-    ) / float(reference_focal)
-    return (np.asarray(offsets, dtype=np.float64) * scale).astype(np.float32)
+    d = depth[pixels[:, 0], pixels[:, 1]].astype(np.float32)
+    row_scale = np.float32(intrinsics.fy / reference_focal) / d
+    col_scale = np.float32(intrinsics.fx / reference_focal) / d
+    return rows, cols, row_scale, col_scale
 
 
 def probe(
@@ -98,11 +94,12 @@ def probe(
     shape: tuple[int, int],
     rows: np.ndarray,
     cols: np.ndarray,
-    inverse_depth: np.ndarray,
+    row_scale: np.ndarray,
+    col_scale: np.ndarray,
     offset_rows: np.ndarray,
     offset_cols: np.ndarray,
 ) -> np.ndarray:
-    """Depth read at ``x + offset / d(x)`` (rounded half up), broadcasting.
+    """Depth read at ``x + offset f / (f_ref d(x))`` (rounded half up), broadcasting.
 
     Parameters
     ----------
@@ -110,10 +107,10 @@ def probe(
         From :func:`probe_image`.
     shape : (int, int)
         ``(H, W)`` of the unpadded image.
-    rows, cols, inverse_depth : float32 arrays
+    rows, cols, row_scale, col_scale : float32 arrays
         From :func:`pixel_terms` (broadcast against the offsets).
     offset_rows, offset_cols : float32 arrays
-        From :func:`scaled_offsets`.
+        Offsets in pixel x metres at the reference focal length.
 
     Returns
     -------
@@ -123,15 +120,15 @@ def probe(
     height, width = shape
     # rows already hold r + 1.5: after clipping to the border (0 or H + 1) truncation is the
     # floor, so any probe off the image lands on the background border.
-    r = offset_rows * inverse_depth
+    r = offset_rows * row_scale
     r += rows
     np.clip(r, 0, height + 1, out=r)
-    c = offset_cols * inverse_depth
+    c = offset_cols * col_scale
     c += cols
     np.clip(c, 0, width + 1, out=c)
-    index = r.astype(np.intp)
-    index *= width + 2
-    index += c.astype(np.intp)
+    index = r.astype(np.int32)
+    index *= np.int32(width + 2)
+    index += c.astype(np.int32)
     return image[index]
 
 
@@ -140,13 +137,14 @@ def pair_features(
     shape: tuple[int, int],
     rows: np.ndarray,
     cols: np.ndarray,
-    inverse_depth: np.ndarray,
+    row_scale: np.ndarray,
+    col_scale: np.ndarray,
     offsets: np.ndarray,
 ) -> np.ndarray:
     """``d(x + u / d(x)) - d(x + v / d(x))`` broadcasting pixels against ``offsets[..., 4]``."""
-    first = probe(image, shape, rows, cols, inverse_depth, offsets[..., 0], offsets[..., 1])
-    second = probe(image, shape, rows, cols, inverse_depth, offsets[..., 2], offsets[..., 3])
-    first -= second
+    terms = (image, shape, rows, cols, row_scale, col_scale)
+    first = probe(*terms, offsets[..., 0], offsets[..., 1])
+    first -= probe(*terms, offsets[..., 2], offsets[..., 3])
     return first
 
 
@@ -167,19 +165,20 @@ def feature_matrix(
     Inputs are assumed valid (see :func:`depth_features` for the checked entry point).
     """
     image = probe_image(depth, mask, background)
-    rows, cols, inverse_depth = pixel_terms(depth, pixels)
-    scaled = scaled_offsets(offsets, intrinsics, reference_focal)
-    n, k = len(pixels), len(scaled)
+    rows, cols, row_scale, col_scale = pixel_terms(depth, pixels, intrinsics, reference_focal)
+    offsets = np.asarray(offsets, dtype=np.float32)
+    n, k = len(pixels), len(offsets)
     if out is None:
         out = np.empty((n, k), dtype=np.float32)
     for start in range(0, k, chunk):
-        block = scaled[start : start + chunk]
+        block = offsets[start : start + chunk]
         out[:, start : start + len(block)] = pair_features(
             image,
             depth.shape,
             rows[:, None],
             cols[:, None],
-            inverse_depth[:, None],
+            row_scale[:, None],
+            col_scale[:, None],
             block[None, :, :],
         )
     return out

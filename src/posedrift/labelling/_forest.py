@@ -23,10 +23,9 @@ from posedrift.camera import Intrinsics
 from posedrift.labelling._features import (
     BACKGROUND_DEPTH,
     REFERENCE_FOCAL,
-    pair_features,
     pixel_terms,
+    probe,
     probe_image,
-    scaled_offsets,
 )
 from posedrift.skeleton import PART_NAMES
 
@@ -136,9 +135,12 @@ class BodyPartForest:
             float(self.background),
             "BodyPartForest",
         )
+        depth = arrays.pop("depth")
         for name, value in arrays.items():
             value.setflags(write=False)
             object.__setattr__(self, name, value)
+        object.__setattr__(self, "_depth", int(depth))
+        object.__setattr__(self, "_table", _node_table(arrays))
         object.__setattr__(self, "reference_focal", float(self.reference_focal))
         object.__setattr__(self, "background", float(self.background))
         object.__setattr__(self, "metadata", dict(self.metadata))
@@ -153,6 +155,11 @@ class BodyPartForest:
     def n_parts(self) -> int:
         """Number of body parts (15)."""
         return self.leaf_values.shape[1]
+
+    @property
+    def depth(self) -> int:
+        """Depth of the deepest tree (edges from the root to the deepest leaf)."""
+        return self._depth
 
     @property
     def n_nodes(self) -> int:
@@ -344,7 +351,9 @@ class BodyPartForest:
         for name in ("reference_focal", "background"):
             value = arrays[name]
             if value.shape != () or value.dtype.kind != "f":
-                raise ValueError(f"{prefix} has a malformed '{name}' ({value.dtype}, {value.shape}).")
+                raise ValueError(
+                    f"{prefix} has a malformed '{name}' ({value.dtype}, {value.shape})."
+                )
             scalars[name] = float(value)
         leaf_values = arrays["leaf_values"]
         if leaf_values.dtype not in (np.float16, np.float32):
@@ -429,17 +438,34 @@ class BodyPartForest:
                 probabilities=np.zeros((0, self.n_parts), dtype=np.float32),
             )
         image = probe_image(depth, valid, self.background)
-        r, c, inv = pixel_terms(depth, pixels)
-        offsets = scaled_offsets(self.offsets, intrinsics, self.reference_focal)
-
-        def features(active: np.ndarray, feature_ids: np.ndarray) -> np.ndarray:
-            return pair_features(
-                image, depth.shape, r[active], c[active], inv[active], offsets[feature_ids]
-            )
-
-        probabilities = self._proba(len(pixels), features)
+        terms = pixel_terms(depth, pixels, intrinsics, self.reference_focal)
+        reached = self._descend_frame(image, depth.shape, terms)
+        probabilities = self._average_leaves(reached)
         labels[rows, cols] = np.argmax(probabilities, axis=1)
         return PartPrediction(labels=labels, pixels=pixels, probabilities=probabilities)
+
+    def _descend_frame(
+        self, image: np.ndarray, shape: tuple[int, int], terms: tuple[np.ndarray, ...]
+    ) -> np.ndarray:
+        """Every (tree, pixel) pair down its tree, all together, one level per step.
+
+        Leaves loop onto themselves (offsets 0, threshold +inf), so the arrays never
+        shrink: each step is a fixed handful of whole-array operations.
+        Returns ``(T, N)`` leaf node ids.
+        """
+        n = len(terms[0])
+        n_trees = self.n_trees
+        tiled = tuple(np.tile(t, n_trees) for t in terms)
+        node = np.repeat(self.roots.astype(np.intp), n)
+        table = self._table
+        for _ in range(self._depth):
+            # One 32-byte row gather per pair; 1-D strided columns keep the loops fast.
+            record = np.take(table, node, axis=0).view(np.int32)
+            values = record.view(np.float32)
+            feature = probe(image, shape, *tiled, values[:, 0], values[:, 1])
+            feature -= probe(image, shape, *tiled, values[:, 2], values[:, 3])
+            node = np.where(feature <= values[:, 4], record[:, 5], record[:, 6])
+        return node.reshape(n_trees, n)
 
     def predict_proba_features(self, features: np.ndarray) -> np.ndarray:
         """Part probabilities ``(N, 15)`` float32 from a precomputed feature matrix.
@@ -455,7 +481,7 @@ class BodyPartForest:
                 f"The 'features' argument must be an (N, {len(self.offsets)}) matrix. "
                 f"Got shape {x.shape} instead."
             )
-        return self._proba(len(x), lambda active, ids: x[active, ids])
+        return self._average_leaves(self._leaves(len(x), lambda active, ids: x[active, ids]))
 
     def apply_features(self, features: np.ndarray) -> np.ndarray:
         """Leaf node reached in each tree, ``(N, T)`` int32 (global node ids)."""
@@ -482,13 +508,35 @@ class BodyPartForest:
             node = np.where(go_left, self.left[node], self.right[node])
         return reached.reshape(n_trees, n)
 
-    def _proba(self, n: int, features: Any) -> np.ndarray:
-        reached = self._leaves(n, features)
-        total = self.leaf_values[self.leaf[reached[0]]].copy()
+    def _average_leaves(self, reached: np.ndarray) -> np.ndarray:
+        """Mean leaf distribution over the trees, ``(N, 15)`` float32."""
+        total = self.leaf_values[self.leaf[reached[0]]]
         for t in range(1, self.n_trees):
             total += self.leaf_values[self.leaf[reached[t]]]
         total /= np.float32(self.n_trees)
         return total
+
+
+def _node_table(arrays: dict[str, np.ndarray]) -> np.ndarray:
+    """Per node, one 32-byte record read with one gather per level during inference.
+
+    As int32 columns: ``u_row, u_col, v_row, v_col, threshold`` (float32 bits),
+    ``left``, ``right``, spare; returned as an ``(M, 4)`` int64 view (fast row gathers).
+    A leaf points to itself on both sides with zero offsets and an infinite threshold.
+    """
+    feature = arrays["feature"]
+    n = len(feature)
+    internal = feature >= 0
+    index = np.arange(n, dtype=np.int32)
+    values = np.zeros((n, 8), dtype=np.float32)
+    values[internal, :4] = arrays["offsets"][feature[internal]]
+    values[:, 4] = np.where(internal, arrays["threshold"], np.float32(np.inf))
+    table = values.view(np.int32)
+    table[:, 5] = np.where(internal, arrays["left"], index)
+    table[:, 6] = np.where(internal, arrays["right"], index)
+    table = table.view(np.int64)
+    table.setflags(write=False)
+    return table
 
 
 def _scalar_text(value: np.ndarray) -> str:
@@ -587,15 +635,19 @@ def _validate_arrays(
                 f"The '{name}' child indices of {caller} must lie in (node, {n_nodes}) "
                 f"(children after their parent; no cycles)."
             )
-    if np.any(leaf[internal] != -1) or np.any(leaf[is_leaf] < 0) or (
-        np.any(leaf[is_leaf] >= len(leaf_values))
+    if (
+        np.any(leaf[internal] != -1)
+        or np.any(leaf[is_leaf] < 0)
+        or (np.any(leaf[is_leaf] >= len(leaf_values)))
     ):
         raise ValueError(
             f"The 'leaf' indices of {caller} must be -1 for internal nodes and in "
             f"[0, {len(leaf_values)}) for leaves."
         )
     frontier = np.unique(roots.astype(np.int64))
-    for _ in range(MAX_DEPTH + 1):
+    depth = 0
+    for level in range(MAX_DEPTH + 1):
+        depth = level
         frontier = frontier[internal[frontier]]
         if len(frontier) == 0:
             break
@@ -611,4 +663,5 @@ def _validate_arrays(
         "right": np.ascontiguousarray(right, dtype=np.int32),
         "leaf": np.ascontiguousarray(leaf, dtype=np.int32),
         "leaf_values": np.ascontiguousarray(leaf_values, dtype=np.float32),
+        "depth": depth,
     }

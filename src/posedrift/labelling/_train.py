@@ -482,9 +482,7 @@ def _stature(joints: np.ndarray) -> float:
     return max(float(joints[JOINT_INDEX["head"], 1] - ankle) / (0.935 - 0.039), 0.5)
 
 
-def random_shape(
-    rng: np.random.Generator, ranges: SceneRanges, morph_names: Sequence[str]
-) -> dict:
+def random_shape(rng: np.random.Generator, ranges: SceneRanges, morph_names: Sequence[str]) -> dict:
     """Keyword arguments of ``BodyModel.with_shape``: height, girth and up to three morphs.
 
     ``female`` (when the body has it) on half of the bodies; up to two other morphs
@@ -570,15 +568,16 @@ def synthetic_training_frames(
     ranges: SceneRanges | None = None,
     intrinsics: Intrinsics | None = None,
     body=None,
+    weights: Sequence[float] | None = None,
     min_pixels: int = 300,
     rng: int | np.random.Generator | None = None,
 ) -> Iterator[LabelledFrame]:
     """Rendered training frames: random poses of random bodies seen from random views.
 
-    Each frame draws a motion (uniformly), a frame of it (its first, the T-pose,
-    with probability ``ranges.t_pose_fraction``), a body shape, a view and noise
-    from ``ranges``. The skeleton is scaled to the body's stature. Frames showing
-    fewer than ``min_pixels`` person pixels are drawn again.
+    Each frame draws a motion (by ``weights``, default uniformly), a frame of it
+    (its first, the T-pose, with probability ``ranges.t_pose_fraction``), a body
+    shape, a view and noise from ``ranges``. The skeleton is scaled to the body's
+    stature. Frames showing fewer than ``min_pixels`` person pixels are drawn again.
 
     Parameters
     ----------
@@ -590,6 +589,10 @@ def synthetic_training_frames(
         Default the ``kinect1-qvga`` preset.
     body : BodyModel, optional
         Default :meth:`BodyModel.load_default`.
+    weights : sequence of float, optional
+        Relative probability of each motion.
+    min_pixels : int
+        Fewest person pixels a frame must show.
     rng : int, Generator or None
 
     Yields
@@ -606,13 +609,20 @@ def synthetic_training_frames(
     if not motions:
         raise ValueError("synthetic_training_frames needs at least one motion.")
     statures = [_stature(np.asarray(m.joints[0], dtype=float)) for m in motions]
+    p = np.ones(len(motions)) if weights is None else np.asarray(weights, dtype=float)
+    if p.shape != (len(motions),) or not np.all(p >= 0) or p.sum() <= 0:
+        raise ValueError(
+            f"The 'weights' of synthetic_training_frames must be {len(motions)} non-negative "
+            f"numbers, one per motion. Got {weights!r}."
+        )
+    p = p / p.sum()
     made = 0
     attempts = 0
     while made < n_frames:
         attempts += 1
         if attempts > 10 * n_frames + 100:
             raise ValueError("synthetic_training_frames: too many views without a person.")
-        k = int(rng.integers(len(motions)))
+        k = int(rng.choice(len(motions), p=p))
         motion = motions[k]
         t = 0 if rng.uniform() < ranges.t_pose_fraction else int(rng.integers(len(motion.joints)))
         shape = random_shape(rng, ranges, base.morph_names)

@@ -174,8 +174,11 @@ def sample_humanoid(
             "The 'joints' argument of sample_humanoid must have shape (15, 3). "
             f"Got shape {joints.shape} instead."
         )
-    n_points = int(check_scalar(n_points, "n_points", low=1, include_low=True, integer=True,
-                                caller="sample_humanoid"))
+    n_points = int(
+        check_scalar(
+            n_points, "n_points", low=1, include_low=True, integer=True, caller="sample_humanoid"
+        )
+    )
     rng = check_rng(rng)
     view = np.asarray(view_direction, dtype=float).reshape(-1)
     if view.shape != (3,) or not np.all(np.isfinite(view)) or not np.any(view):

@@ -82,8 +82,13 @@ def low_rank_kernel(source: np.ndarray, beta: float, rank: int) -> tuple[np.ndar
     ev, u = np.linalg.eigh(wk)
     keep = ev > ev.max() * 1e-12
     z = c @ (u[:, keep] / np.sqrt(ev[keep]))  # G ~ Z Z'
-    q, s, _ = np.linalg.svd(z, full_matrices=False)
-    return q, s * s
+    # eigenpairs of Z Z' through a thin QR: Z = Q_z R, Z Z' = Q_z (R R') Q_z'
+    qz, r = np.linalg.qr(z)
+    s, v = np.linalg.eigh(r @ r.T)
+    order = np.argsort(s)[::-1]
+    s, v = s[order], v[:, order]
+    good = s > s[0] * 1e-12
+    return qz @ v[:, good], s[good]
 
 
 def _solve_nonrigid(g, lowrank, p1, px, source, sigma2, smoothness):
@@ -97,15 +102,15 @@ def _solve_nonrigid(g, lowrank, p1, px, source, sigma2, smoothness):
         a = g * sq[:, None]
         a *= sq[None, :]
         a.flat[:: a.shape[0] + 1] += reg
-        v = sla.cho_solve(sla.cho_factor(a, lower=True, check_finite=False), rhs,
-                          check_finite=False)
+        v = sla.cho_solve(
+            sla.cho_factor(a, lower=True, check_finite=False), rhs, check_finite=False
+        )
         return sq[:, None] * v
     q, lam = lowrank
     b = px - p1[:, None] * source
     small = (q.T * p1) @ q  # K x K
     small.flat[:: small.shape[0] + 1] += reg / lam
-    inner = sla.cho_solve(sla.cho_factor(small, check_finite=False), q.T @ b,
-                          check_finite=False)
+    inner = sla.cho_solve(sla.cho_factor(small, check_finite=False), q.T @ b, check_finite=False)
     return (b - p1[:, None] * (q @ inner)) / reg
 
 
@@ -125,11 +130,13 @@ def _check_common(name, source, target, outlier_weight, tol, max_iter, dtype, wa
             f"The 'source' and 'target' arguments of {name} must have the same number of "
             f"columns. Got {src.shape[1]} and {tgt.shape[1]} instead."
         )
-    w = check_scalar(outlier_weight, "outlier_weight", low=0.0, high=1.0, include_low=True,
-                     caller=name)
+    w = check_scalar(
+        outlier_weight, "outlier_weight", low=0.0, high=1.0, include_low=True, caller=name
+    )
     tol = check_scalar(tol, "tol", low=0.0, include_low=True, caller=name)
-    max_iter = check_scalar(max_iter, "max_iter", low=1, include_low=True, integer=True,
-                            caller=name)
+    max_iter = check_scalar(
+        max_iter, "max_iter", low=1, include_low=True, integer=True, caller=name
+    )
     dt = np.dtype(dtype) if dtype in (np.float32, np.float64, "float32", "float64") else None
     if dt is None:
         raise ValueError(
@@ -268,8 +275,9 @@ def register_nonrigid(
     beta = check_scalar(kernel_width, "kernel_width", low=0.0, caller=name)
     lam = check_scalar(smoothness, "smoothness", low=0.0, caller=name)
     if low_rank is not None:
-        low_rank = check_scalar(low_rank, "low_rank", low=1, include_low=True, integer=True,
-                                caller=name)
+        low_rank = check_scalar(
+            low_rank, "low_rank", low=1, include_low=True, integer=True, caller=name
+        )
     m, d = src.shape
     n = tgt.shape[0]
     centre, unit = _normalization(tgt, normalize)
@@ -291,8 +299,9 @@ def register_nonrigid(
     objective = np.inf
     for it in range(max_iter + 1):
         c = outlier_constant(sigma2, w, m, n, d)
-        p1, pt1, px, log_den = _estep.estep(tgt_e, moved.astype(dt), sigma2, c, compiled=compiled,
-                                               truncate_eps=_TRUNCATE_EPS)
+        p1, pt1, px, log_den = _estep.estep(
+            tgt_e, moved.astype(dt), sigma2, c, compiled=compiled, truncate_eps=_TRUNCATE_EPS
+        )
         gw = moved - src_n
         objective = -log_den + 0.5 * n * d * np.log(sigma2) + 0.5 * lam * float(np.sum(wmat * gw))
         if it > 0 and _relative_change(objective, obj_old) <= tol:
@@ -331,8 +340,21 @@ def register_nonrigid(
     )
 
 
-def _linear_cpd(name, kind, source, target, *, outlier_weight, tol, max_iter, normalize,
-                dtype, warm_start, compiled, with_scale=True):
+def _linear_cpd(
+    name,
+    kind,
+    source,
+    target,
+    *,
+    outlier_weight,
+    tol,
+    max_iter,
+    normalize,
+    dtype,
+    warm_start,
+    compiled,
+    with_scale=True,
+):
     src, tgt, w, tol, max_iter, dt = _check_common(
         name, source, target, outlier_weight, tol, max_iter, dtype, warm_start
     )
@@ -365,8 +387,9 @@ def _linear_cpd(name, kind, source, target, *, outlier_weight, tol, max_iter, no
     it = 0
     for it in range(max_iter + 1):
         c = outlier_constant(sigma2, w, m, n, d)
-        p1, pt1, px, log_den = _estep.estep(tgt_e, moved.astype(dt), sigma2, c, compiled=compiled,
-                                               truncate_eps=_TRUNCATE_EPS)
+        p1, pt1, px, log_den = _estep.estep(
+            tgt_e, moved.astype(dt), sigma2, c, compiled=compiled, truncate_eps=_TRUNCATE_EPS
+        )
         objective = -log_den + 0.5 * n * d * np.log(sigma2)
         if it > 0 and _relative_change(objective, obj_old) <= tol:
             converged = True
@@ -472,10 +495,20 @@ def register_rigid(
     True
     """
     scale = bool(scale)
-    return _linear_cpd("register_rigid", "rigid", source, target,
-                       outlier_weight=outlier_weight, tol=tol, max_iter=max_iter,
-                       normalize=normalize, dtype=dtype, warm_start=warm_start,
-                       compiled=compiled, with_scale=scale)
+    return _linear_cpd(
+        "register_rigid",
+        "rigid",
+        source,
+        target,
+        outlier_weight=outlier_weight,
+        tol=tol,
+        max_iter=max_iter,
+        normalize=normalize,
+        dtype=dtype,
+        warm_start=warm_start,
+        compiled=compiled,
+        with_scale=scale,
+    )
 
 
 def register_affine(
@@ -508,7 +541,16 @@ def register_affine(
     >>> bool(np.allclose(res.matrix, b, atol=1e-3))
     True
     """
-    return _linear_cpd("register_affine", "affine", source, target,
-                       outlier_weight=outlier_weight, tol=tol, max_iter=max_iter,
-                       normalize=normalize, dtype=dtype, warm_start=warm_start,
-                       compiled=compiled)
+    return _linear_cpd(
+        "register_affine",
+        "affine",
+        source,
+        target,
+        outlier_weight=outlier_weight,
+        tol=tol,
+        max_iter=max_iter,
+        normalize=normalize,
+        dtype=dtype,
+        warm_start=warm_start,
+        compiled=compiled,
+    )

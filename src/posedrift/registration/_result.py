@@ -103,7 +103,11 @@ class CPDResult:
         m = self._moved_n.shape[0]
         n_labels = int(
             check_scalar(
-                n_labels, "n_labels", low=1, include_low=True, integer=True,
+                n_labels,
+                "n_labels",
+                low=1,
+                include_low=True,
+                integer=True,
                 caller="transfer_labels",
             )
         )

@@ -11,8 +11,9 @@ Conventions (the Biovision format as written by MotionBuilder, CMU, Blender):
   ``CHANNELS 3 Zrotation Xrotation Yrotation`` giving ``R = Rz @ Rx @ Ry`` acting on
   column vectors (child to parent);
 - a joint's position in its parent's frame is its ``OFFSET``, except where the joint
-  has position channels: those values are then the translation from the parent and
-  the ``OFFSET`` is the rest value they replace (Blender's and bvhio's reading);
+  has position channels: those values then replace the ``OFFSET`` (axis by axis) as
+  the translation from the parent (the reading of Blender and bvhio, which agree with
+  this module on the development clips);
 - ``End Site`` blocks become leaf nodes named ``<parent>/End Site`` with no channels.
 """
 
@@ -59,7 +60,7 @@ class BvhData:
     motion: np.ndarray
     frame_time: float
     source: str = "<string>"
-    _columns: tuple[int, ...] = field(default=(), repr=False)
+    _columns: tuple[int, ...] = field(default=(), init=False, repr=False)
 
     def __post_init__(self) -> None:
         starts, column = [], 0
@@ -81,57 +82,21 @@ class BvhData:
         nearest = round(fps)
         return float(nearest) if nearest > 0 and abs(fps - nearest) <= 5e-4 * nearest else fps
 
-    @property
-    def is_end_site(self) -> np.ndarray:
-        """``(N,)`` bool: which nodes are end sites."""
-        return np.array([n.endswith(END_SITE_SUFFIX) for n in self.names])
-
     def index(self, name: str) -> int:
         """Index of the node called ``name``; KeyError if absent."""
         return self.names.index(name)
-
-    def children(self, i: int) -> list[int]:
-        """Indices of the children of node ``i``."""
-        return [j for j, p in enumerate(self.parents) if p == i]
-
-    def local_transforms(self, nodes: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Per-frame local rotations and translations.
-
-        Parameters
-        ----------
-        nodes : (K,) int, optional
-            Node indices to compute (all by default).
-
-        Returns
-        -------
-        rotations : (T, K, 3, 3) float
-            Child-to-parent rotation of each node.
-        translations : (T, K, 3) float
-            Position of each node in its parent's frame, file units.
-        """
-        nodes = np.arange(len(self.names)) if nodes is None else np.asarray(nodes)
-        t = self.n_frames
-        rot = np.empty((t, len(nodes), 3, 3))
-        trans = np.empty((t, len(nodes), 3))
-        for k, i in enumerate(nodes):
-            rot[:, k], trans[:, k] = self._local(int(i))
-        return rot, trans
 
     def _local(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         t = self.n_frames
         r = np.broadcast_to(np.eye(3), (t, 3, 3))
         p = np.broadcast_to(self.offsets[i], (t, 3)).copy()
         start = self._columns[i]
-        positioned = False
         for c, name in enumerate(self.channels[i]):
             values = self.motion[:, start + c]
             if name in _POSITIONS:
-                if not positioned:
-                    p[:] = 0.0
-                    positioned = True
-                p[:, _POSITIONS.index(name)] = values
+                p[:, _POSITIONS.index(name)] = values  # replaces that axis of the OFFSET
             else:
-                r = _axis_rotation(_ROTATIONS.index(name), values) @ r
+                r = r @ _axis_rotation(_ROTATIONS.index(name), values)
         return np.array(r), p
 
     def global_transforms(self) -> tuple[np.ndarray, np.ndarray]:

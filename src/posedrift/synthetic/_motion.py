@@ -218,8 +218,10 @@ def to_world(
 
     Scales to metres, rotates ``up`` onto +Y, turns about +Y so that the person faces
     +Z at frame 0 (forward = right-to-left x up, from hips and shoulders), puts the
-    floor at y = 0 (the lowest ankle at frame 0 at ``ankle_height``, or the lowest toe
-    at frame 0 on the floor when that is lower) and the pelvis centre at x = z = 0.
+    floor at y = 0 and the pelvis centre at x = z = 0. The floor is frame 0's lowest foot
+    point (the lower ankle less ``ankle_height``, or a toe where lower), or the 5th
+    percentile over frames of that point where lower (a clip that starts hanging from a
+    bar or in a jump).
     Where the toes point backward (a left-handed file), the forward axis is mirrored.
 
     Returns
@@ -249,10 +251,14 @@ def to_world(
             flip = np.diag([1.0, 1.0, -1.0])
             j = j @ flip
             ex = {k: v @ flip for k, v in ex.items()}
-    floor = min(j[0, _J["left_foot"], 1], j[0, _J["right_foot"], 1]) - ankle_height
-    toes0 = [ex[k][0, 1] for k in ("left_toe", "right_toe") if k in ex]
-    if toes0:
-        floor = min(floor, min(toes0))
+    # Per frame, the lowest foot point: an ankle less the ankle height, or a toe.
+    lowest = np.minimum(j[:, _J["left_foot"], 1], j[:, _J["right_foot"], 1]) - ankle_height
+    for k in ("left_toe", "right_toe"):
+        if k in ex:
+            lowest = np.minimum(lowest, ex[k][:, 1])
+    # Frame 0's, unless the clip goes lower in more than 5 % of its frames (a clip that
+    # starts hanging from a bar, or in a jump, stands on the ground later).
+    floor = min(lowest[0], float(np.percentile(lowest, 5.0)))
     pelvis = 0.5 * (j[0, _J["left_hip"]] + j[0, _J["right_hip"]])
     shift = np.array([pelvis[0], floor, pelvis[2]])
     return j - shift, {k: v - shift for k, v in ex.items()}, mirrored

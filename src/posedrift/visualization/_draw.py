@@ -282,18 +282,46 @@ def _write_animation(pictures: list[np.ndarray], path: Path, fps: float) -> Path
         # pad to whole 16-pixel macro blocks so that the encoder does not resize
         pad_h, pad_w = (-stack.shape[1]) % 16, (-stack.shape[2]) % 16
         padded = np.pad(stack, ((0, 0), (0, pad_h), (0, pad_w), (0, 0)))
-        import imageio_ffmpeg
-
-        writer = imageio_ffmpeg.write_frames(
-            str(path), (padded.shape[2], padded.shape[1]), fps=fps, macro_block_size=16
-        )
-        writer.send(None)
-        try:
-            for picture in padded:
-                writer.send(np.ascontiguousarray(picture))
-        finally:
-            writer.close()
+        _encode_mp4(padded, path, fps)
     return path
+
+
+def _encode_mp4(stack: np.ndarray, path: Path, fps: float) -> None:
+    """H.264 through the ffmpeg binary that imageio-ffmpeg ships (one process, no leaks)."""
+    import subprocess
+
+    import imageio_ffmpeg
+
+    _, height, width, _ = stack.shape
+    command = [
+        imageio_ffmpeg.get_ffmpeg_exe(),
+        "-y",
+        "-loglevel",
+        "error",
+        "-f",
+        "rawvideo",
+        "-pix_fmt",
+        "rgb24",
+        "-s",
+        f"{width}x{height}",
+        "-r",
+        f"{fps:g}",
+        "-i",
+        "-",
+        "-an",
+        "-vcodec",
+        "libx264",
+        "-pix_fmt",
+        "yuv420p",
+        str(path),
+    ]
+    run = subprocess.run(
+        command, input=np.ascontiguousarray(stack).tobytes(), capture_output=True, check=False
+    )
+    if run.returncode != 0:
+        raise ValueError(
+            f"ffmpeg could not write {path}: {run.stderr.decode(errors='replace')[-500:]}"
+        )
 
 
 def write_depth_video(

@@ -166,8 +166,17 @@ button { background: #333; color: #ddd; border: 1px solid #555; padding: 2px 10p
     else if (e.key === " ") { e.preventDefault(); togglePlay(); }
   });
   window.addEventListener("resize", draw);
-  const start = (data.start !== undefined) ? data.start : 0;
-  setFrame(start);
+  // optional initial view from the address: viewer.html#frame=10&yaw=1.2&pitch=0.3&zoom=2
+  const view = {};
+  window.location.hash.replace(/^#/, "").split("&").forEach(function (kv) {
+    const pair = kv.split("=");
+    if (pair.length === 2 && isFinite(parseFloat(pair[1]))) view[pair[0]] = parseFloat(pair[1]);
+  });
+  if (view.yaw !== undefined) yaw = view.yaw;
+  if (view.pitch !== undefined) pitch = Math.max(-1.5, Math.min(1.5, view.pitch));
+  if (view.zoom !== undefined) zoom = Math.max(0.2, Math.min(8, view.zoom));
+  const start = view.frame !== undefined ? view.frame : (data.start !== undefined ? data.start : 0);
+  setFrame(Math.round(start));
 })();
 </script>
 </body>
@@ -257,7 +266,9 @@ def write_viewer(
 
     The page works offline in any browser (no network, no libraries: a small
     2-D-canvas projection script is inlined). A slider picks the frame, play
-    animates at ``fps``, dragging rotates the view, the wheel zooms.
+    animates at ``fps``, dragging rotates the view, the wheel zooms. The address
+    may set the first view: ``viewer.html#frame=10&yaw=1.57&pitch=0.3&zoom=1.5``
+    (radians; yaw turns about the vertical axis).
 
     Parameters
     ----------
