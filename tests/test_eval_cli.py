@@ -200,3 +200,27 @@ def test_eval_rejects_unknown_methods(tmp_path):
     result = CliRunner().invoke(app, ["eval", "synthetic", "builtin", "--methods", "magic"])
     assert result.exit_code == 2
     assert "Unknown method(s) ['magic']" in result.stderr
+
+
+def test_figures_are_written(tmp_path):
+    from posedrift.evaluation._figures import crossing_scores
+
+    seq = _toy_sequence(n=14)
+    truth = seq.reference.joints[0]
+    report = evaluate(
+        [seq],
+        {"offset": lambda k, forest=None: Offset(truth), "centroid": Centroid},
+        progress=False,
+        forest=object(),
+        figures_dir=tmp_path,
+    )
+    names = sorted(p.split("/")[-1] for p in report["figures"])
+    assert names == ["fig12_overlays_toy.png", "fig6_labels_toy.png", "fig9_angles_toy.png"]
+    for p in report["figures"]:
+        with open(p, "rb") as f:
+            assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+    # crossing: right hand moved to the person's left of the left hand scores higher
+    crossed = truth.copy()
+    crossed[[6, 7]] = crossed[[7, 6]]
+    scores = crossing_scores(np.stack([truth, crossed]))
+    assert scores[1] > scores[0] + 0.5

@@ -303,3 +303,67 @@ def _stature_of(motion) -> float:
     from posedrift.labelling._train import _stature
 
     return _stature(np.asarray(motion.joints[0], dtype=float))
+
+
+def _write_synth_folder(folder: Path, frames: list[LabelledFrame]) -> Path:
+    import imageio.v3 as iio
+
+    (folder / "depth").mkdir(parents=True)
+    (folder / "labels").mkdir()
+    for i, frame in enumerate(frames):
+        mm = np.rint(frame.depth * 1000).astype(np.uint16)
+        iio.imwrite(folder / "depth" / f"{i:06d}.png", mm)
+        iio.imwrite(folder / "labels" / f"{i:06d}.png", frame.labels)
+    truth = {"intrinsics": CAM.to_dict(), "fps": 30.0, "frames": []}
+    (folder / "ground_truth.json").write_text(json.dumps(truth))
+    return folder
+
+
+def test_cli_eval_labels_writes_json_and_picture(toy_forest, tmp_path):
+    from typer.testing import CliRunner
+
+    from posedrift.cli import app
+
+    rng = np.random.default_rng(21)
+    folder = _write_synth_folder(tmp_path / "synth", [toy_frame(rng) for _ in range(3)])
+    model = toy_forest.save(tmp_path / "toy.npz")
+    out = tmp_path / "labels.json"
+    result = CliRunner().invoke(
+        app, ["-q", "eval", "labels", str(folder), "--json", str(out), "--model", str(model)]
+    )
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert set(data) == {"pixel_accuracy", "per_part", "frames", "ms_per_frame"}
+    assert data["frames"] == 3 and data["pixel_accuracy"] > 0.9
+    assert list(data["per_part"]) == list(PART_NAMES) and data["ms_per_frame"] > 0
+    assert (tmp_path / "labels.png").stat().st_size > 1000
+    # A corrupt model and a folder that is not a synth folder: clear errors, exit code 2.
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(model.read_bytes()[:100])
+    result = CliRunner().invoke(
+        app, ["eval", "labels", str(folder), "--json", str(out), "--model", str(bad)]
+    )
+    assert result.exit_code == 2 and "truncated or corrupt" in result.output
+    result = CliRunner().invoke(
+        app, ["eval", "labels", str(tmp_path), "--json", str(out), "--model", str(model)]
+    )
+    assert result.exit_code == 2 and "ground_truth.json" in result.output
+
+
+def test_cli_train_is_reproducible(tmp_path):
+    pytest.importorskip("sklearn")
+    from typer.testing import CliRunner
+
+    from posedrift.cli import app
+
+    empty = tmp_path / "no_clips"
+    empty.mkdir()
+    args = ["-q", "train", "--frames", "3", "--pixels", "200", "--offsets", "40"]
+    args += ["--depth", "8", "--mocap", str(empty), "--jobs", "1"]
+    for name in ("a.npz", "b.npz"):
+        result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / name)])
+        assert result.exit_code == 0, result.output
+    a, b = BodyPartForest.load(tmp_path / "a.npz"), BodyPartForest.load(tmp_path / "b.npz")
+    np.testing.assert_array_equal(a.threshold, b.threshold)
+    np.testing.assert_array_equal(a.offsets, b.offsets)
+    assert a.metadata["procedural_share"] == 1.0 and a.metadata["seed"] == 0

@@ -130,6 +130,15 @@ def test_all_8bit_folder_is_an_error_naming_the_file(tmp_path):
         open_depth_source(folder)
 
 
+def test_folder_of_unreadable_pngs_is_an_error(tmp_path):
+    folder = tmp_path / "junk"
+    folder.mkdir()
+    for name in ("a.png", "b.png"):
+        (folder / name).write_bytes(b"junk")
+    with pytest.raises(ValueError, match=r"None of the 2 PNG files in .*junk' is readable"):
+        open_depth_source(folder)
+
+
 def test_empty_folder_is_an_error(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(ValueError, match=r"empty.*holds no \.png depth frames"):

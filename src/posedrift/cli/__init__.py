@@ -15,6 +15,8 @@ _COMMAND_MODULES: tuple[str, ...] = (
     "_bench_cpd",
     "_view",
     "_eval",
+    "_track",
+    "_demo",
 )
 
 for _name in _COMMAND_MODULES:

@@ -167,8 +167,8 @@ def hard_frames(run, sequence: str, count: int = 4, min_gap: int = 10) -> list[i
             e = np.linalg.norm(
                 run.runs[(method, sequence)].joints - record.reference.joints, axis=2
             )
-            errs.append(np.nanmean(e, axis=1))
-        score = np.nan_to_num(np.nanmean(np.stack(errs), axis=0))
+            errs.append(np.where(np.isfinite(e), e, 0.0).mean(axis=1))
+        score = np.mean(np.stack(errs), axis=0)
     score = score.copy()
     score[0] = -np.inf  # the calibration frame is not a hard one
     chosen: list[int] = []
@@ -180,7 +180,9 @@ def hard_frames(run, sequence: str, count: int = 4, min_gap: int = 10) -> list[i
     return sorted(chosen) or [0]
 
 
-def _draw_skeleton(ax, joints: np.ndarray, intrinsics: Intrinsics, colour: str, offset) -> None:
+def _draw_skeleton(
+    ax, joints: np.ndarray, intrinsics: Intrinsics, colour: str, offset, style: str = "-"
+) -> None:
     if not np.isfinite(joints).any():
         return
     uv = project(np.nan_to_num(joints, nan=0.0), intrinsics)
@@ -188,7 +190,7 @@ def _draw_skeleton(ax, joints: np.ndarray, intrinsics: Intrinsics, colour: str, 
     uv = uv - np.array([offset[1], offset[0]])
     for i, p in enumerate(JOINT_PARENTS):
         if p >= 0:
-            ax.plot(uv[[i, p], 0], uv[[i, p], 1], "-", color=colour, lw=1.6)
+            ax.plot(uv[[i, p], 0], uv[[i, p], 1], style, color=colour, lw=1.6)
     ax.plot(uv[:, 0], uv[:, 1], "o", color=colour, ms=2.5)
     for side, marker in (("left", "s"), ("right", "^")):
         for name in (f"{side}_hand", f"{side}_foot"):
@@ -214,10 +216,12 @@ def overlay_figure(run, sequence: str, path: Path, frames: list[int]) -> Path | 
         shown = np.where(crop > 0, crop, np.nan)
         for i, method in enumerate(run.methods):
             ax = axes[i, j]
-            ax.imshow(shown, cmap="gray_r", interpolation="nearest")
+            ax.imshow(shown, cmap="gray_r", interpolation="nearest", alpha=0.55)
             ax.set_facecolor("black")
             offset = (rs.start or 0, cs.start or 0)
-            _draw_skeleton(ax, record.reference.joints[t], record.intrinsics, "white", offset)
+            _draw_skeleton(
+                ax, record.reference.joints[t], record.intrinsics, "lime", offset, style="--"
+            )
             est = run.runs[(method, sequence)].results[t].joints
             _draw_skeleton(ax, est, record.intrinsics, _COLOURS[i % len(_COLOURS)], offset)
             ax.set_xlim(0, crop.shape[1])
@@ -229,7 +233,7 @@ def overlay_figure(run, sequence: str, path: Path, frames: list[int]) -> Path | 
             if i == 0:
                 ax.set_title(f"frame {t}", fontsize=9)
     ref = "ground truth" if record.reference.kind == "synthetic" else "Kinect reference"
-    fig.suptitle(f"{sequence}: estimate (colour) and {ref} (white); ▲ right, ■ left")
+    fig.suptitle(f"{sequence}: estimate (solid) and {ref} (green, dashed); ▲ right, ■ left")
     fig.tight_layout()
     fig.savefig(path, dpi=80)
     plt.close(fig)

@@ -124,7 +124,15 @@ class RealSenseSource(DepthSource):
         finally:
             pipeline.stop()
 
+    def __repr__(self) -> str:
+        frames = "?" if self._length is None else self._length  # counting needs a full pass
+        return (
+            f"RealSenseSource({str(self.path)!r}, frames={frames}, "
+            f"{self.intrinsics.width}x{self.intrinsics.height}, depth_scale={self.depth_scale:g})"
+        )
+
     def __len__(self) -> int:
+        """The number of depth frames (the first call plays the recording through once)."""
         if self._length is None:
             self._length = sum(1 for _ in self._frames())
         return self._length

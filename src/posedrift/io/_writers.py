@@ -131,6 +131,9 @@ def write_poses(
     frames = []
     for r, status in zip(results, bvh_pose, strict=True):
         frame = r.to_json()
+        frame["confidence"] = [c if math.isfinite(c) else None for c in frame["confidence"]]
+        if "timestamp" in frame and not math.isfinite(frame["timestamp"]):
+            del frame["timestamp"]
         frame["bvh_pose"] = status
         frames.append(frame)
     document = {

@@ -428,7 +428,7 @@ class BodyPartForest:
                     f"shape {depth.shape}. Got shape {mask.shape} instead."
                 )
             valid &= mask.astype(bool, copy=False)
-        rows, cols = np.nonzero(valid)
+        rows, cols = np.divmod(np.flatnonzero(valid), depth.shape[1])
         pixels = np.column_stack([rows, cols]).astype(np.intp)
         labels = np.full(depth.shape, -1, dtype=np.int16)
         if len(pixels) == 0:
@@ -441,7 +441,7 @@ class BodyPartForest:
         terms = pixel_terms(depth, pixels, intrinsics, self.reference_focal)
         reached = self._descend_frame(image, depth.shape, terms)
         probabilities = self._average_leaves(reached)
-        labels[rows, cols] = np.argmax(probabilities, axis=1)
+        labels[rows, cols] = _argmax_rows(probabilities)
         return PartPrediction(labels=labels, pixels=pixels, probabilities=probabilities)
 
     def _descend_frame(
@@ -510,11 +510,23 @@ class BodyPartForest:
 
     def _average_leaves(self, reached: np.ndarray) -> np.ndarray:
         """Mean leaf distribution over the trees, ``(N, 15)`` float32."""
-        total = self.leaf_values[self.leaf[reached[0]]]
+        total = np.take(self.leaf_values, self.leaf[reached[0]], axis=0)
         for t in range(1, self.n_trees):
-            total += self.leaf_values[self.leaf[reached[t]]]
+            total += np.take(self.leaf_values, self.leaf[reached[t]], axis=0)
         total /= np.float32(self.n_trees)
         return total
+
+
+def _argmax_rows(values: np.ndarray) -> np.ndarray:
+    """``values.argmax(axis=1)`` (first maximum wins), fast for few columns."""
+    best = values[:, 0].copy()
+    index = np.zeros(len(values), dtype=np.int16)
+    for k in range(1, values.shape[1]):
+        column = values[:, k]
+        better = column > best
+        index[better] = k
+        np.maximum(best, column, out=best)
+    return index
 
 
 def _node_table(arrays: dict[str, np.ndarray]) -> np.ndarray:

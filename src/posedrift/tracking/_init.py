@@ -193,3 +193,34 @@ def smooth_labels(labels: np.ndarray, rows: np.ndarray, cols: np.ndarray, n_iter
         labels[has] = np.argmax(counts[has], axis=1)
     return labels
 
+
+
+def measure_reach(
+    graph,
+    points: np.ndarray,
+    labels: np.ndarray,
+    anchors: np.ndarray,
+    *,
+    height: float,
+    quantile: float = 90.0,
+    margin: float = 0.03,
+    min_points: int = 5,
+) -> np.ndarray:
+    """``D_j`` of Algorithm 2 measured on a labelled frame, as a fraction of stature.
+
+    The ``quantile`` of the geodesic distances from each part's anchor to the part's
+    own points, plus ``margin`` metres; clipped to [0.7, 2] times the prior
+    (:func:`prior_reach`), which also stands in for parts with too few points.
+    """
+    from posedrift.labelling._relabel import geodesic_distances
+
+    prior = prior_reach(height)
+    geo = geodesic_distances(graph, points, anchors, labels)
+    out = prior.copy()
+    for j in range(len(prior)):
+        own = geo[j, labels == j]
+        own = own[np.isfinite(own)]
+        if len(own) >= min_points:
+            value = (np.percentile(own, quantile) + margin) / height
+            out[j] = float(np.clip(value, 0.7 * prior[j], 2.0 * prior[j]))
+    return out

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -25,7 +25,13 @@ from posedrift.points._segment import BackgroundModel, segment_person
 from posedrift.skeleton._fit import SkeletonFit, fit_skeleton, part_anchors
 from posedrift.skeleton._meanshift import part_modes
 from posedrift.tracking._health import Health, assess
-from posedrift.tracking._init import Calibration, calibrate, label_template_points, smooth_labels
+from posedrift.tracking._init import (
+    Calibration,
+    calibrate,
+    label_template_points,
+    measure_reach,
+    smooth_labels,
+)
 from posedrift.tracking._result import FrameResult, FrameStatus
 
 N_PARTS = 15
@@ -421,9 +427,12 @@ class PoseTracker:
             return attempt
         if not np.isfinite(attempt.fit.joints).all():
             return attempt
+        cal = self._calibration
+        anchors = part_anchors(attempt.fit.joints, cal.bone_lengths)
+        if fresh_calibration:
+            reach = measure_reach(graph, points, labels, anchors, height=cal.height)
+            self._calibration = cal = replace(cal, reach=reach)
         if self.relabel:  # Clean the forest's labels with Algorithm 2 and refit.
-            cal = self._calibration
-            anchors = part_anchors(attempt.fit.joints, cal.bone_lengths)
             labels2 = relabel(
                 points, labels, anchors, height=cal.height, ratios=cal.reach,
                 alpha=self.alpha, graph=graph,
