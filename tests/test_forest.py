@@ -172,7 +172,7 @@ def test_save_load_round_trip(toy_forest, tmp_path):
     for name in ("offsets", "roots", "feature", "threshold", "left", "right", "leaf"):
         np.testing.assert_array_equal(getattr(loaded, name), getattr(toy_forest, name))
     np.testing.assert_allclose(loaded.leaf_values, toy_forest.leaf_values, atol=1e-3)
-    assert loaded.metadata == json.loads(json.dumps(toy_forest.metadata))
+    assert loaded.metadata == json.loads(json.dumps(dict(toy_forest.metadata)))
     frame = toy_frame(np.random.default_rng(3))
     a = toy_forest.predict(frame.depth, frame.mask, CAM)
     b = loaded.predict(frame.depth, frame.mask, CAM)
@@ -231,6 +231,10 @@ def test_truncated_and_pickled_files_are_rejected(toy_forest, tmp_path):
         BodyPartForest.load(not_zip)
     with pytest.raises(ValueError, match="Cannot read"):
         BodyPartForest.load(tmp_path / "absent.npz")
+    npy = tmp_path / "array.npy"
+    np.save(npy, np.arange(3))
+    with pytest.raises(ValueError, match="not an .npz archive"):
+        BodyPartForest.load(npy)
     # An object array (a pickle inside the .npy) is never unpickled.
     with np.load(good, allow_pickle=False) as npz:
         arrays = {k: npz[k] for k in npz.files}
@@ -333,7 +337,8 @@ def test_cli_eval_labels_writes_json_and_picture(toy_forest, tmp_path):
     )
     assert result.exit_code == 0, result.output
     data = json.loads(out.read_text())
-    assert set(data) == {"pixel_accuracy", "per_part", "frames", "ms_per_frame"}
+    assert {"pixel_accuracy", "per_part", "frames", "ms_per_frame"} <= set(data)
+    assert sum(band["frames"] for band in data["by_distance"].values()) == 3
     assert data["frames"] == 3 and data["pixel_accuracy"] > 0.9
     assert list(data["per_part"]) == list(PART_NAMES) and data["ms_per_frame"] > 0
     assert (tmp_path / "labels.png").stat().st_size > 1000
@@ -367,3 +372,21 @@ def test_cli_train_is_reproducible(tmp_path):
     np.testing.assert_array_equal(a.threshold, b.threshold)
     np.testing.assert_array_equal(a.offsets, b.offsets)
     assert a.metadata["procedural_share"] == 1.0 and a.metadata["seed"] == 0
+
+
+def test_training_frames_are_seeded_and_show_a_person():
+    from posedrift.labelling._train import SceneRanges, synthetic_training_frames
+    from posedrift.synthetic import procedural_motion
+
+    motion = procedural_motion(seconds=2.0)
+    ranges = SceneRanges(wide_fraction=0.0)
+    a = list(synthetic_training_frames(3, [motion], ranges=ranges, rng=4))
+    b = list(synthetic_training_frames(3, [motion], ranges=ranges, rng=4))
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x.depth, y.depth)
+        np.testing.assert_array_equal(x.labels, y.labels)
+        assert np.count_nonzero(x.mask) >= 300
+        # Distances 2-3.5 m: the person's median depth lies in that range (+- body depth).
+        assert 1.8 < np.median(x.depth[x.mask]) < 3.8
+    with pytest.raises(ValueError, match="'weights'"):
+        next(synthetic_training_frames(1, [motion], weights=[0.0], rng=0))

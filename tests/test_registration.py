@@ -331,3 +331,12 @@ def test_result_is_frozen(body):
     res = register_rigid(body, body)
     with pytest.raises(AttributeError):
         res.sigma2 = 1.0  # type: ignore[misc]
+
+
+def test_works_without_the_compiled_extension(body, monkeypatch):
+    target = _smooth_warp(body)
+    with_ext = register_nonrigid(body, target)
+    monkeypatch.setattr(_estep, "_cestep", None)
+    assert not _estep.has_compiled_kernel()
+    without = register_nonrigid(body, target)
+    np.testing.assert_allclose(without.moved, with_ext.moved, atol=1e-9)

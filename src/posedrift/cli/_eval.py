@@ -15,6 +15,18 @@ _METHODS_HELP = (
 )
 
 
+def _forest(model: Path | None):
+    """The forest all methods share: loaded once here (None: the harness loads the default)."""
+    if model is None:
+        return None
+    from posedrift.labelling import BodyPartForest
+
+    try:
+        return BodyPartForest.load(model)
+    except ValueError as exc:
+        raise fail(str(exc)) from exc
+
+
 def _finish(report: dict, skipped: list[dict], json_out: Path | None, paper: bool) -> None:
     import json
 
@@ -63,10 +75,18 @@ def eval_synthetic(
     figures: Annotated[
         Path | None, typer.Option("--figures", help="Write Fig. 9, 6 and 12 (PNG) here.")
     ] = None,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the noise and trackers.")] = 0,
+    seed: Annotated[
+        int, typer.Option("--seed", help="Seed of the depth noise (clip i uses seed + i).")
+    ] = 0,
     paper: Annotated[
         bool, typer.Option("--paper/--no-paper", help="Show the paper's rows for reference.")
     ] = True,
+    model: Annotated[
+        Path | None,
+        typer.Option(
+            "--model", help="Body-part forest file shared by all methods (default: shipped)."
+        ),
+    ] = None,
 ) -> None:
     """Render clips and evaluate every method on the same frames (the paper's Table 1).
 
@@ -102,7 +122,12 @@ def eval_synthetic(
         _finish_empty(skipped, json_out, "synthetic")
     try:
         report = evaluate(
-            sequences, names, progress=progress_enabled(), figures_dir=figures, protocol="synthetic"
+            sequences,
+            names,
+            forest=_forest(model),
+            progress=progress_enabled(),
+            figures_dir=figures,
+            protocol="synthetic",
         )
     except ValueError as exc:
         raise fail(str(exc)) from exc
@@ -143,6 +168,12 @@ def eval_utd(
     paper: Annotated[
         bool, typer.Option("--paper/--no-paper", help="Show the paper's rows for reference.")
     ] = False,
+    model: Annotated[
+        Path | None,
+        typer.Option(
+            "--model", help="Body-part forest file shared by all methods (default: shipped)."
+        ),
+    ] = None,
 ) -> None:
     """Evaluate every method on UTD-MHAD against the Kinect SDK skeleton.
 
@@ -194,7 +225,12 @@ def eval_utd(
         _finish_empty(skipped, json_out, "utd")
     try:
         report = evaluate(
-            loaded(), names, progress=progress_enabled(), figures_dir=figures, protocol="utd"
+            loaded(),
+            names,
+            forest=_forest(model),
+            progress=progress_enabled(),
+            figures_dir=figures,
+            protocol="utd",
         )
     except ValueError as exc:
         if "No sequence" in str(exc):

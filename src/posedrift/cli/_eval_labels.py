@@ -29,7 +29,7 @@ def eval_labels(
 ) -> None:
     """Label every frame of a synth folder with the forest and compare with the truth.
 
-    Writes {"pixel_accuracy", "per_part", "frames", "ms_per_frame"} to the JSON file
+    Writes {"pixel_accuracy", "per_part", "frames", "ms_per_frame", "by_distance"} to the JSON
     and a PNG of a few frames (depth | truth | prediction).
 
     Example: posedrift synth builtin --out walk && posedrift eval labels walk --json acc.json

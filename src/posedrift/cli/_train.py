@@ -19,7 +19,9 @@ def _default_mocap() -> Path | None:
 @app.command("train")
 def train(
     out: Annotated[Path, typer.Option("--out", help="Where to write the model (.npz).")],
-    frames: Annotated[int, typer.Option("--frames", min=1, help="Rendered training frames.")] = 800,
+    frames: Annotated[
+        int, typer.Option("--frames", min=1, help="Rendered training frames.")
+    ] = 2000,
     seed: Annotated[int, typer.Option("--seed", help="Seed: the same seed, the same model.")] = 0,
     mocap: Annotated[
         Path | None,
@@ -35,7 +37,7 @@ def train(
     ] = None,
     pixels: Annotated[
         int, typer.Option("--pixels", min=1, help="Pixels sampled per frame.")
-    ] = 1500,
+    ] = 1000,
     offsets: Annotated[int, typer.Option("--offsets", min=1, help="Candidate offset pairs.")] = 500,
     trees: Annotated[int, typer.Option("--trees", min=1, help="Number of trees.")] = 3,
     depth: Annotated[int, typer.Option("--depth", min=1, max=64, help="Tree depth.")] = 20,
@@ -58,7 +60,7 @@ def train(
     motion, bodies of varied height, girth and build, views within 45 degrees of
     frontal at 2-3.5 m, Kinect-like noise on half of the frames.
 
-    Example: posedrift train --frames 800 --seed 0 --out forest.npz
+    Example: posedrift train --frames 2000 --seed 0 --out forest.npz
     """
     import time
 

@@ -15,7 +15,7 @@ from posedrift.skeleton import (
     PART_COLOURS,
 )
 
-_COLOURS = ("tab:red", "tab:blue", "tab:green", "tab:orange", "tab:purple", "tab:brown")
+_COLOURS = ("tab:red", "tab:blue", "tab:purple", "tab:orange", "tab:brown", "tab:pink", "tab:cyan")
 
 
 def _pyplot():
@@ -52,7 +52,7 @@ def angle_figure(run, sequence: str, path: Path) -> Path:
     axes[0, 0].legend(loc="lower left", fontsize=8, ncol=2)
     kind = "ground truth" if record.reference.kind == "synthetic" else "Kinect reference"
     fig.suptitle(f"Estimated (solid) and {kind} (dashed) joint angles: {sequence}")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
     fig.savefig(path, dpi=80)
     plt.close(fig)
     return path
@@ -90,28 +90,79 @@ def _crop(images: list[np.ndarray], margin: int = 8) -> tuple[slice, slice]:
     )
 
 
-def label_figure(run, sequence: str, path: Path, frames: list[int]) -> Path | None:
-    """Fig. 6: label maps, ground truth and each method's labelled points, on a few frames.
+def relabel_snapshots(
+    frames, wanted: list[int], *, forest=None, intrinsics: Intrinsics | None = None
+) -> dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The tracker's labels just before and after its geodesic relabelling, on some frames.
 
-    With both ``cpd`` and ``cpd-norelabel`` in the run, their rows show the tracked
-    labels with and without the geodesic relabelling (two runs of the tracker, not
-    one frame before and after; the tracker does not expose its labels before
-    relabelling).
+    Runs a fresh :class:`~posedrift.tracking.PoseTracker` (the ``cpd`` method) over
+    the frames up to the last wanted one, with its call of
+    :func:`posedrift.labelling.relabel` observed (a debug hook from outside: the
+    tracker does not expose these labels). Returns ``{frame: (points, before,
+    after)}``; empty if the tracker cannot be observed.
     """
+    import posedrift.tracking._tracker as tracker_module
+    from posedrift.tracking import PoseTracker
+
+    original = getattr(tracker_module, "relabel", None)
+    if original is None or not frames or not wanted:
+        return {}
+    calls: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def observed(points, labels, *args, **kwargs):
+        out = original(points, labels, *args, **kwargs)
+        after = out[0] if isinstance(out, tuple) else out
+        calls.append((np.array(points), np.array(labels), np.array(after)))
+        return out
+
+    snapshots = {}
+    tracker_module.relabel = observed
+    try:
+        tracker = PoseTracker(intrinsics or frames[0].intrinsics, forest=forest)
+        last = max(wanted)
+        for frame in frames[: last + 1]:
+            calls.clear()
+            tracker.process(frame)
+            if frame.index in wanted and calls:
+                snapshots[frame.index] = calls[-1]
+    finally:
+        tracker_module.relabel = original
+    return snapshots
+
+
+def label_figure(run, sequence: str, path: Path, frames: list[int], *, forest=None) -> Path | None:
+    """Fig. 6: label maps: ground truth, the tracker's labels before and after the
+    geodesic relabelling (:func:`relabel_snapshots`), and each method's labels."""
     plt = _pyplot()
     record = next(r for r in run.sequences if r.name == sequence)
     if record.reference.labels is None:
         return None
     palette = np.vstack([[0, 0, 0], np.array(PART_COLOURS, dtype=np.uint8)]).astype(np.uint8)
     rows = [("ground truth", [palette[record.reference.labels[t]] for t in frames])]
+    blank = np.zeros((*record.intrinsics.shape, 3), dtype=np.uint8)
+    if record.frames is not None and "cpd" in run.methods:
+        try:
+            snaps = relabel_snapshots(record.frames, frames, forest=forest)
+        except Exception:  # a figure must not sink an evaluation
+            snaps = {}
+        if snaps:
+            for k, title in ((1, "cpd: registered labels"), (2, "cpd: after relabelling")):
+                rows.append(
+                    (
+                        title,
+                        [
+                            _label_image(snaps[t][0], snaps[t][k], record.intrinsics)
+                            if t in snaps
+                            else blank
+                            for t in frames
+                        ],
+                    )
+                )
     for method in run.methods:
         results = run.runs[(method, sequence)].results
-        title = {"cpd": "cpd (relabelled)", "cpd-norelabel": "cpd without relabelling"}.get(
-            method, method
-        )
         rows.append(
             (
-                title,
+                f"{method} (result)",
                 [
                     _label_image(results[t].points, results[t].labels, record.intrinsics)
                     for t in frames
@@ -121,10 +172,11 @@ def label_figure(run, sequence: str, path: Path, frames: list[int]) -> Path | No
     fig, axes = plt.subplots(
         len(rows), len(frames), figsize=(2.3 * len(frames), 2.9 * len(rows)), squeeze=False
     )
-    for i, (title, images) in enumerate(rows):
-        for j, (ax, im) in enumerate(zip(axes[i], images, strict=True)):
-            rs, cs = _crop([r[1][j] for r in rows])
-            ax.imshow(im[rs, cs], interpolation="nearest")
+    for j in range(len(frames)):
+        rs, cs = _crop([r[1][j] for r in rows])
+        for i, (title, images) in enumerate(rows):
+            ax = axes[i, j]
+            ax.imshow(images[j][rs, cs], interpolation="nearest")
             ax.set_xticks([])
             ax.set_yticks([])
             if j == 0:
@@ -132,7 +184,7 @@ def label_figure(run, sequence: str, path: Path, frames: list[int]) -> Path | No
             if i == 0:
                 ax.set_title(f"frame {frames[j]}", fontsize=9)
     fig.suptitle(f"Body-part labels: {sequence}")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
     fig.savefig(path, dpi=80)
     plt.close(fig)
     return path
@@ -234,13 +286,13 @@ def overlay_figure(run, sequence: str, path: Path, frames: list[int]) -> Path | 
                 ax.set_title(f"frame {t}", fontsize=9)
     ref = "ground truth" if record.reference.kind == "synthetic" else "Kinect reference"
     fig.suptitle(f"{sequence}: estimate (solid) and {ref} (green, dashed); ▲ right, ■ left")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
     fig.savefig(path, dpi=80)
     plt.close(fig)
     return path
 
 
-def write_figures(run, out_dir: str | Path, *, max_sequences: int = 3) -> list[Path]:
+def write_figures(run, out_dir: str | Path, *, max_sequences: int = 3, forest=None) -> list[Path]:
     """Write Fig. 9, 6 and 12 for the first ``max_sequences`` sequences of a run.
 
     Returns
@@ -255,7 +307,7 @@ def write_figures(run, out_dir: str | Path, *, max_sequences: int = 3) -> list[P
         name = _safe(record.name)
         written.append(angle_figure(run, record.name, out / f"fig9_angles_{name}.png"))
         frames = hard_frames(run, record.name)
-        p = label_figure(run, record.name, out / f"fig6_labels_{name}.png", frames)
+        p = label_figure(run, record.name, out / f"fig6_labels_{name}.png", frames, forest=forest)
         if p is not None:
             written.append(p)
         p = overlay_figure(run, record.name, out / f"fig12_overlays_{name}.png", frames)

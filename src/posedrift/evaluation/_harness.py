@@ -150,6 +150,7 @@ class EvaluationRun:
     sequences: list[SequenceRecord]
     methods: list[str]
     runs: dict[tuple[str, str], MethodRun]
+    forest: Any = None
 
 
 def label_hits(result: FrameResult, labels: np.ndarray, intrinsics: Intrinsics) -> tuple[int, int]:
@@ -283,7 +284,9 @@ def run_methods(
     if protocol is None:
         kinds = {r.reference.kind for r in records}
         protocol = "synthetic" if kinds == {"synthetic"} else "utd"
-    return EvaluationRun(protocol=protocol, sequences=records, methods=list(factories), runs=runs)
+    return EvaluationRun(
+        protocol=protocol, sequences=records, methods=list(factories), runs=runs, forest=forest
+    )
 
 
 def _default_forest() -> Any:
@@ -292,6 +295,14 @@ def _default_forest() -> Any:
     except ImportError:
         return None
     return BodyPartForest.load_default()
+
+
+def _status_counts(runs: list[MethodRun]) -> dict[str, int]:
+    counts = dict.fromkeys((s.value for s in FrameStatus), 0)
+    for run in runs:
+        for result in run.results:
+            counts[result.status.value] += 1
+    return counts
 
 
 def _round(value: float | None, digits: int = 4) -> float | None:
@@ -304,8 +315,9 @@ def summarize(run: EvaluationRun) -> dict:
     Errors are computed over all frames of all sequences together; failed frames
     (no pose) are counted and left out of the error means. Extra fields beyond
     section 6: per method ``"filled"`` (the same errors with each failed frame
-    filled by the last known pose), ``"per_sequence"`` and ``"method_errors"``
-    (exceptions a method raised, counted as failed frames).
+    filled by the last known pose), ``"per_sequence"``, ``"method_errors"``
+    (exceptions a method raised, counted as failed frames) and ``"status_counts"``
+    (frames per :class:`~posedrift.tracking.FrameStatus`).
     """
     out: dict[str, Any] = {
         "protocol": run.protocol,
@@ -348,6 +360,7 @@ def summarize(run: EvaluationRun) -> dict:
                 for s, r in zip(run.sequences, per, strict=True)
             },
             "method_errors": sum(len(r.errors) for r in per),
+            "status_counts": _status_counts(per),
         }
         out["methods"][name] = row
     return out
@@ -397,7 +410,7 @@ def evaluate(
     if figures_dir is not None:
         from posedrift.evaluation._figures import write_figures
 
-        report["figures"] = [str(p) for p in write_figures(run, figures_dir)]
+        report["figures"] = [str(p) for p in write_figures(run, figures_dir, forest=run.forest)]
     return report
 
 

@@ -83,7 +83,8 @@ def pixel_terms(
     """
     rows = pixels[:, 0].astype(np.float32) + np.float32(1.5)
     cols = pixels[:, 1].astype(np.float32) + np.float32(1.5)
-    d = depth[pixels[:, 0], pixels[:, 1]].astype(np.float32)
+    flat = pixels[:, 0] * depth.shape[1] + pixels[:, 1]
+    d = np.take(depth.reshape(-1), flat).astype(np.float32)
     row_scale = np.float32(intrinsics.fy / reference_focal) / d
     col_scale = np.float32(intrinsics.fx / reference_focal) / d
     return rows, cols, row_scale, col_scale
@@ -129,7 +130,7 @@ def probe(
     index = r.astype(np.int32)
     index *= np.int32(width + 2)
     index += c.astype(np.int32)
-    return image[index]
+    return np.take(image, index)  # much faster than image[index] for 1-D gathers
 
 
 def pair_features(

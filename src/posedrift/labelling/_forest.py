@@ -11,10 +11,12 @@ from __future__ import annotations
 import io
 import json
 import zipfile
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib import resources
 from os import PathLike
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -37,6 +39,7 @@ MAX_OFFSET = 5000.0
 """Largest offset (pixel x metres) a model file may hold."""
 
 _DEFAULT_MODEL = "forest_default.npz"
+_LOADED_DEFAULT: list = []  # the default model, once loaded
 _KEYS = (
     "format",
     "version",
@@ -97,8 +100,8 @@ class BodyPartForest:
         Focal length (pixels) of the offsets.
     background : float
         Depth (metres) read by background and off-image probes.
-    metadata : dict
-        JSON-serialisable facts about training (seed, frames, ...).
+    metadata : mapping
+        JSON-serialisable facts about training (seed, frames, ...); read-only.
 
     Examples
     --------
@@ -117,7 +120,7 @@ class BodyPartForest:
     leaf_values: np.ndarray
     reference_focal: float = REFERENCE_FOCAL
     background: float = BACKGROUND_DEPTH
-    metadata: dict = field(default_factory=dict)
+    metadata: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         arrays = _validate_arrays(
@@ -143,7 +146,7 @@ class BodyPartForest:
         object.__setattr__(self, "_table", _node_table(arrays))
         object.__setattr__(self, "reference_focal", float(self.reference_focal))
         object.__setattr__(self, "background", float(self.background))
-        object.__setattr__(self, "metadata", dict(self.metadata))
+        object.__setattr__(self, "metadata", MappingProxyType(dict(self.metadata)))
 
     # ------------------------------------------------------------------ properties
     @property
@@ -266,7 +269,7 @@ class BodyPartForest:
                 format=np.array(FORMAT_NAME),
                 version=np.array(FORMAT_VERSION, dtype=np.int32),
                 part_names=np.array(PART_NAMES),
-                metadata=np.array(json.dumps(self.metadata, sort_keys=True)),
+                metadata=np.array(json.dumps(dict(self.metadata), sort_keys=True)),
                 reference_focal=np.array(self.reference_focal),
                 background=np.array(self.background),
                 offsets=self.offsets,
@@ -300,7 +303,12 @@ class BodyPartForest:
 
     @classmethod
     def load_default(cls) -> BodyPartForest:
-        """The model shipped with posedrift (trained by ``posedrift train``)."""
+        """The model shipped with posedrift (trained by ``posedrift train``).
+
+        Loaded once per process and shared: the model is immutable.
+        """
+        if _LOADED_DEFAULT:
+            return _LOADED_DEFAULT[0]
         resource = resources.files("posedrift").joinpath("data", _DEFAULT_MODEL)
         try:
             data = resource.read_bytes()
@@ -309,11 +317,15 @@ class BodyPartForest:
                 f"The default forest model {_DEFAULT_MODEL} is missing from the posedrift "
                 f"package; train one with 'posedrift train --out MODEL'."
             ) from exc
-        return cls._from_bytes(data, f"posedrift/data/{_DEFAULT_MODEL}")
+        forest = cls._from_bytes(data, f"posedrift/data/{_DEFAULT_MODEL}")
+        _LOADED_DEFAULT.append(forest)
+        return forest
 
     @classmethod
     def _from_bytes(cls, data: bytes, where: str) -> BodyPartForest:
         prefix = f"The forest model file {where}"
+        if not data.startswith(b"PK"):
+            raise ValueError(f"{prefix} is truncated or corrupt: not an .npz archive (a zip file).")
         try:
             with np.load(io.BytesIO(data), allow_pickle=False) as npz:
                 missing = [k for k in _KEYS if k not in npz.files]
@@ -428,7 +440,8 @@ class BodyPartForest:
                     f"shape {depth.shape}. Got shape {mask.shape} instead."
                 )
             valid &= mask.astype(bool, copy=False)
-        rows, cols = np.divmod(np.flatnonzero(valid), depth.shape[1])
+        flat = np.flatnonzero(valid)
+        rows, cols = np.divmod(flat, depth.shape[1])
         pixels = np.column_stack([rows, cols]).astype(np.intp)
         labels = np.full(depth.shape, -1, dtype=np.int16)
         if len(pixels) == 0:
@@ -441,7 +454,7 @@ class BodyPartForest:
         terms = pixel_terms(depth, pixels, intrinsics, self.reference_focal)
         reached = self._descend_frame(image, depth.shape, terms)
         probabilities = self._average_leaves(reached)
-        labels[rows, cols] = _argmax_rows(probabilities)
+        np.put(labels, flat, _argmax_rows(probabilities))
         return PartPrediction(labels=labels, pixels=pixels, probabilities=probabilities)
 
     def _descend_frame(
@@ -510,9 +523,9 @@ class BodyPartForest:
 
     def _average_leaves(self, reached: np.ndarray) -> np.ndarray:
         """Mean leaf distribution over the trees, ``(N, 15)`` float32."""
-        total = np.take(self.leaf_values, self.leaf[reached[0]], axis=0)
+        total = np.take(self.leaf_values, np.take(self.leaf, reached[0]), axis=0)
         for t in range(1, self.n_trees):
-            total += np.take(self.leaf_values, self.leaf[reached[t]], axis=0)
+            total += np.take(self.leaf_values, np.take(self.leaf, reached[t]), axis=0)
         total /= np.float32(self.n_trees)
         return total
 

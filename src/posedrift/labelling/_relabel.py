@@ -108,30 +108,48 @@ def geodesic_graph(
 def geodesic_distances(
     graph: GeodesicGraph, points: np.ndarray, anchors: np.ndarray, labels: np.ndarray | None = None
 ) -> np.ndarray:
-    """Dijkstra distances ``(J, N)`` from each anchor (Algorithm 2, step 2).
+    """Dijkstra distances ``(J, N)`` from each part's anchor(s) (Algorithm 2, step 2).
 
-    Each anchor's source vertex is the nearest point carrying its label (where
-    ``labels`` is given and the part has points), else the nearest point. The
-    Euclidean gap from the anchor to its source vertex is added. Unreachable
-    points and NaN anchors give ``inf``.
+    Parameters
+    ----------
+    graph : GeodesicGraph
+    points : (N, 3) float
+    anchors : (J, 3) or (J, K, 3) float
+        One anchor per part, or K anchors per part (e.g. points along its bone);
+        a part's distance is the smallest over its anchors. NaN anchors are skipped.
+    labels : (N,) int, optional
+        Where given, each anchor's source vertex is the nearest point carrying its
+        part's label (if the part has points), else the nearest point.
+
+    Returns
+    -------
+    distances : (J, N) float
+        The Euclidean gap from an anchor to its source vertex is included.
+        Unreachable points and parts without anchors give ``inf``.
     """
     from scipy.sparse.csgraph import dijkstra
 
     anchors = np.asarray(anchors, dtype=float)
-    n_parts = len(anchors)
+    if anchors.ndim == 2:
+        anchors = anchors[:, None, :]
+    n_parts, k = anchors.shape[:2]
     out = np.full((n_parts, len(points)), np.inf)
-    valid = np.isfinite(anchors).all(axis=1)
+    flat = anchors.reshape(-1, 3)
+    part_of = np.repeat(np.arange(n_parts), k)
+    valid = np.isfinite(flat).all(axis=1)
     if not valid.any():
         return out
-    d2 = ((anchors[valid, None, :] - points[None, :, :]) ** 2).sum(-1)  # (J', N)
+    flat, part_of = flat[valid], part_of[valid]
+    d2 = ((flat[:, None, :] - points[None, :, :]) ** 2).sum(-1)  # (A, N)
     if labels is not None:
-        own = labels[None, :] == np.nonzero(valid)[0][:, None]
+        own = labels[None, :] == part_of[:, None]
         has = own.any(axis=1)
         d2 = np.where(own | ~has[:, None], d2, np.inf)
     sources = np.argmin(d2, axis=1)
     gap = np.sqrt(d2[np.arange(len(sources)), sources])
-    geo = dijkstra(graph.matrix, directed=False, indices=sources)
-    out[valid] = geo + gap[:, None]
+    geo = dijkstra(graph.matrix, directed=False, indices=sources) + gap[:, None]
+    for j in np.unique(part_of):
+        out[j] = geo[part_of == j].min(axis=0)
     return out
 
 
@@ -147,6 +165,7 @@ def relabel(
     evidence: np.ndarray | None = None,
     evidence_floor: float = 0.05,
     graph: GeodesicGraph | None = None,
+    keep_plausible: bool = True,
     return_likelihood: bool = False,
 ):
     """Algorithm 2 (labelling template set): relabel points by geodesic reach.
@@ -157,8 +176,10 @@ def relabel(
         The labelled point set ``S_D`` (metres).
     labels : (N,) int
         Current part of each point (``PART_NAMES`` index; -1 unknown).
-    part_joints : (15, 3) float
-        ``J_j``, the joint (anchor) of each part, metres; NaN for a part not known.
+    part_joints : (15, 3) or (15, K, 3) float
+        ``J_j``, the joint (anchor) of each part, metres, or K anchors per part
+        (points along its bone: the distance is then to the nearest); NaN for a
+        part not known.
     height : float
         Stature ``H`` in metres.
     ratios : (15,) float
@@ -175,6 +196,10 @@ def relabel(
         tracked part cannot reach it.
     graph : GeodesicGraph, optional
         A graph already built on ``points``.
+    keep_plausible : bool
+        Keep a point's tracked label (its evidence's argmax) wherever that part's
+        likelihood is at least 0.5, and relabel only the others (the default). With
+        False every point takes the argmax of evidence times likelihood.
     return_likelihood : bool
         Also return the ``(N, 15)`` likelihood ``P``.
 
@@ -204,7 +229,7 @@ def relabel(
     part_joints = np.asarray(part_joints, dtype=float)
     ratios = np.asarray(ratios, dtype=float).reshape(-1)
     n_parts = len(part_joints)
-    if part_joints.shape != (n_parts, 3) or ratios.shape != (n_parts,):
+    if part_joints.shape[-1] != 3 or part_joints.ndim not in (2, 3) or ratios.shape != (n_parts,):
         raise ValueError(
             "The 'part_joints' (J, 3) and 'ratios' (J,) arguments of relabel must agree. "
             f"Got {part_joints.shape} and {ratios.shape}."
@@ -233,9 +258,26 @@ def relabel(
                 f"Got {evidence.shape} instead."
             )
     total = evidence.sum(axis=1, keepdims=True)
-    norm = np.where(total > 0, evidence / np.where(total > 0, total, 1.0), 1.0 / n_parts)
+    # Rows without evidence (registration outliers) fall back on the given labels.
+    weak = total[:, 0] <= 1e-6
+    known = (labels >= 0) & (labels < n_parts)
+    fill = weak & known
+    if fill.any():
+        evidence = evidence.copy()
+        evidence[fill] = 0.0
+        evidence[np.nonzero(fill)[0], labels[fill]] = 1.0
+        total = evidence.sum(axis=1, keepdims=True)
+    norm = np.where(total > 1e-6, evidence / np.where(total > 1e-6, total, 1.0), 1.0 / n_parts)
     score = (norm + evidence_floor) * likelihood
-    new = np.argmax(score, axis=1)
+    new = np.argmax(norm, axis=1)
+    if not keep_plausible:
+        new = np.argmax(score, axis=1)
+    else:
+        # Keep each tracked label its part can reach; relabel only the implausible ones.
+        # A point cut off from its part's graph component has no geodesic evidence.
+        rows = np.arange(len(new))
+        implausible = (likelihood[rows, new] < 0.5) & np.isfinite(geo[rows, new])
+        new[implausible] = np.argmax(score[implausible], axis=1)
     # Where no part reaches a point, keep its evidence.
     stuck = score.max(axis=1) < 1e-6
     if stuck.any():

@@ -359,6 +359,10 @@ def comparison_picture(frames: Sequence[tuple[LabelledFrame, np.ndarray]]) -> np
     return np.vstack(rows[:-1])
 
 
+DISTANCE_BANDS: tuple[tuple[float, float], ...] = ((0.0, 1.5), (1.5, 2.5), (2.5, float("inf")))
+"""Bands of a frame's median person depth (metres) that accuracy is also reported in."""
+
+
 def evaluate_label_folder(
     folder: str | Path,
     forest: BodyPartForest,
@@ -375,44 +379,70 @@ def evaluate_label_folder(
     Returns
     -------
     dict
-        ``{"pixel_accuracy": x, "per_part": {part: x}, "frames": n, "ms_per_frame": x}``
+        ``{"pixel_accuracy": x, "per_part": {part: x}, "frames": n, "ms_per_frame": x,
+        "by_distance": {"0-1.5m": {"pixel_accuracy": x, "frames": n}, ...}}``
         (per-part accuracy: the share of that part's pixels labelled correctly; null
-        for a part never seen). ``ms_per_frame`` is the median time of ``predict``.
+        for a part never seen). ``ms_per_frame`` is the median time of ``predict``
+        over the frames that show the person. ``by_distance`` splits the frames by
+        their median person depth: clips where the person walks up to the camera are
+        dominated by close frames, which hold many more pixels.
     """
     n_parts = len(PART_NAMES)
     correct = np.zeros(n_parts, dtype=np.int64)
     total = np.zeros(n_parts, dtype=np.int64)
+    band_correct = np.zeros(len(DISTANCE_BANDS), dtype=np.int64)
+    band_total = np.zeros(len(DISTANCE_BANDS), dtype=np.int64)
+    band_frames = np.zeros(len(DISTANCE_BANDS), dtype=np.int64)
     times = []
-    pictures: list[tuple[LabelledFrame, np.ndarray]] = []
-    frames = list(read_label_folder(folder, max_frames=max_frames))
-    picked = set(np.linspace(0, len(frames) - 1, min(n_pictures, len(frames))).astype(int))
-    with _progress(progress, "labelling", len(frames)) as advance:
-        for i, (_, frame) in enumerate(frames):
+    shown: list[tuple[LabelledFrame, np.ndarray]] = []
+    n_frames = 0
+    frames = read_label_folder(folder, max_frames=max_frames)
+    with _progress(progress, "labelling", None) as advance:
+        for _, frame in frames:
+            n_frames += 1
             mask = frame.mask
             started = time.perf_counter()
             pred = forest.predict(frame.depth, mask, frame.intrinsics)
-            times.append(time.perf_counter() - started)
+            elapsed = time.perf_counter() - started
+            advance()
+            if not mask.any():
+                continue
+            times.append(elapsed)
             truth = frame.labels[mask].astype(np.intp) - 1
             guess = pred.labels[mask]
+            right = guess == truth
             total += np.bincount(truth, minlength=n_parts)[:n_parts]
-            correct += np.bincount(truth[guess == truth], minlength=n_parts)[:n_parts]
-            if i in picked:
-                pictures.append((frame, pred.labels))
-            advance()
-    if png is not None and pictures:
+            correct += np.bincount(truth[right], minlength=n_parts)[:n_parts]
+            distance = float(np.median(frame.depth[mask]))
+            band = next(i for i, (lo, hi) in enumerate(DISTANCE_BANDS) if lo <= distance < hi)
+            band_correct[band] += int(right.sum())
+            band_total[band] += len(truth)
+            band_frames[band] += 1
+            if np.count_nonzero(mask) >= 300:
+                shown.append((frame, pred.labels))
+    if png is not None and shown:
         import imageio.v3 as iio
 
+        picked = np.linspace(0, len(shown) - 1, min(n_pictures, len(shown))).astype(int)
         Path(png).parent.mkdir(parents=True, exist_ok=True)
-        iio.imwrite(png, comparison_picture(pictures))
+        iio.imwrite(png, comparison_picture([shown[i] for i in picked]))
     per_part = {
         name: (float(correct[i] / total[i]) if total[i] else None)
         for i, name in enumerate(PART_NAMES)
     }
+    by_distance = {
+        (f"{lo:g}-{hi:g}m" if np.isfinite(hi) else f">={lo:g}m"): {
+            "pixel_accuracy": float(band_correct[i] / band_total[i]) if band_total[i] else None,
+            "frames": int(band_frames[i]),
+        }
+        for i, (lo, hi) in enumerate(DISTANCE_BANDS)
+    }
     return {
         "pixel_accuracy": float(correct.sum() / total.sum()) if total.sum() else None,
         "per_part": per_part,
-        "frames": len(frames),
+        "frames": n_frames,
         "ms_per_frame": float(np.median(times) * 1e3) if times else None,
+        "by_distance": by_distance,
     }
 
 
@@ -463,6 +493,15 @@ class SceneRanges:
         Share of frames with Kinect-like noise.
     t_pose_fraction : float
         Share of frames showing a clip's first frame (the T-pose calibration pose).
+    wide_fraction : float
+        Share of frames from a wider set of views, as a fixed camera sees a person
+        who walks about: distances ``wide_distance``, the person off the optical axis
+        by up to ``wide_aim`` degrees (partly out of view at times), turned by up to
+        ``wide_yaw`` degrees (side views).
+    wide_distance : (float, float)
+        Metres.
+    wide_aim, wide_yaw : float
+        Degrees.
     """
 
     height: tuple[float, float] = (1.5, 1.95)
@@ -472,6 +511,10 @@ class SceneRanges:
     camera_height: tuple[float, float] = (0.7, 1.3)
     noise_fraction: float = 0.5
     t_pose_fraction: float = 0.1
+    wide_fraction: float = 0.3
+    wide_distance: tuple[float, float] = (1.0, 4.5)
+    wide_aim: float = 25.0
+    wide_yaw: float = 100.0
 
 
 def _stature(joints: np.ndarray) -> float:
@@ -525,9 +568,12 @@ def render_training_frame(
     aim_at_body: bool,
     noise: bool,
     rng: np.random.Generator,
+    aim: float = 0.0,
 ) -> LabelledFrame:
     """Pose ``body`` on world ``joints`` and render it from a camera ``yaw`` degrees off
-    the person's facing direction (positive: toward the person's left)."""
+    the person's facing direction (positive: toward the person's left), ``distance``
+    metres from the pelvis, looking ``aim`` degrees to the side of the person, level
+    or (``aim_at_body``) down or up at the pelvis."""
     from posedrift.camera import CameraPose
     from posedrift.skeleton import pelvis_centre
     from posedrift.synthetic import kinect_noise, render
@@ -545,6 +591,17 @@ def render_training_frame(
     eye = np.array([centre[0], camera_height, centre[2]]) + distance * direction
     target_y = float(centre[1]) if aim_at_body else camera_height
     target = np.array([centre[0], target_y, centre[2]])
+    if aim:
+        turn = np.radians(aim)
+        look = target - eye
+        look = np.array(
+            [
+                look[0] * np.cos(turn) + look[2] * np.sin(turn),
+                look[1],
+                -look[0] * np.sin(turn) + look[2] * np.cos(turn),
+            ]
+        )
+        target = eye + look
     camera = CameraPose.look_at(eye, target)
     vertices = body.pose(joints, extras)
     out = render(
@@ -626,6 +683,7 @@ def synthetic_training_frames(
         motion = motions[k]
         t = 0 if rng.uniform() < ranges.t_pose_fraction else int(rng.integers(len(motion.joints)))
         shape = random_shape(rng, ranges, base.morph_names)
+        wide = bool(rng.uniform() < ranges.wide_fraction)
         height = shape["height"]
         joints = np.asarray(motion.joints[t], dtype=float)
         extras = {name: np.asarray(v[t], dtype=float) for name, v in (motion.extras or {}).items()}
@@ -639,10 +697,11 @@ def synthetic_training_frames(
             extras,
             shaped,
             intrinsics,
-            yaw=rng.uniform(-ranges.yaw, ranges.yaw),
-            distance=rng.uniform(*ranges.distance),
+            yaw=rng.uniform(-1.0, 1.0) * (ranges.wide_yaw if wide else ranges.yaw),
+            distance=rng.uniform(*(ranges.wide_distance if wide else ranges.distance)),
             camera_height=rng.uniform(*ranges.camera_height),
             aim_at_body=bool(rng.uniform() < 0.5),
+            aim=rng.uniform(-ranges.wide_aim, ranges.wide_aim) if wide else 0.0,
             noise=bool(rng.uniform() < ranges.noise_fraction),
             rng=rng,
         )

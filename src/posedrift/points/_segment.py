@@ -83,6 +83,7 @@ def fit_floor_plane(
     threshold: float = 0.03,
     iterations: int = 60,
     min_inliers: int = 200,
+    min_extent: float = 1.0,
     rng: int | np.random.Generator | None = 0,
 ) -> tuple[np.ndarray, float] | None:
     """RANSAC for a floor plane ``n . x + d = 0`` roughly perpendicular to ``up``.
@@ -100,6 +101,8 @@ def fit_floor_plane(
     iterations : int
     min_inliers : int
         Fewest inliers for a plane to count as the floor.
+    min_extent : float
+        Smallest extent (metres) of the inliers along the plane.
     rng : int, Generator or None
 
     Returns
@@ -116,7 +119,11 @@ def fit_floor_plane(
     cos_tilt = np.cos(np.radians(max_tilt_deg))
     sample = points if len(points) <= 3000 else points[gen.choice(len(points), 3000, replace=False)]
     scale = len(points) / len(sample)
-    tri = gen.integers(0, len(sample), size=(iterations, 3))
+    # Hypotheses from the lowest quarter of the points (where a floor must be).
+    low = np.argpartition(sample @ up, max(3, len(sample) // 4) - 1)[: max(3, len(sample) // 4)]
+    if np.ptp(sample[low], axis=0).max() < min_extent:
+        return None  # the lowest points are too compact to be a floor (feet)
+    tri = low[gen.integers(0, len(low), size=(iterations, 3))]
     a, b, c = sample[tri[:, 0]], sample[tri[:, 1]], sample[tri[:, 2]]
     normals = np.cross(b - a, c - a)
     norms = np.linalg.norm(normals, axis=1)
@@ -144,7 +151,10 @@ def fit_floor_plane(
     if normal @ up < cos_tilt:
         normal = normals[best]
         centre = a[best]
-    # A floor lies below (almost) everything else: most points are on its upper side.
+    # A floor is wide (not the top of a foot) ...
+    if np.ptp(inl - (inl @ normal)[:, None] * normal, axis=0).max() < min_extent:
+        return None
+    # ... and lies below (almost) everything else: most points are on its upper side.
     signed = points @ normal - normal @ centre
     if np.mean(signed < -2 * threshold) > 0.05:
         return None
@@ -152,15 +162,16 @@ def fit_floor_plane(
 
 
 def _components(mask: np.ndarray, depth: np.ndarray, max_step: float) -> tuple[np.ndarray, int]:
-    """Connected components of ``mask`` where 4-neighbours closer than ``max_step`` in depth join."""
+    """Components of ``mask``; 4-neighbours join where their depths differ by < ``max_step``."""
     from scipy import ndimage
 
     # Cut pixels at depth discontinuities, label, then give cut pixels their neighbours' label.
     d = np.where(mask, depth, 0.0)
     jump = np.zeros(mask.shape, dtype=bool)
-    dv = np.abs(np.diff(d, axis=0)) > max_step
-    dh = np.abs(np.diff(d, axis=1)) > max_step
-    # The farther pixel of a jump is the one that is cut.
+    # Only steps between two kept pixels count (the silhouette's own edge is no step).
+    dv = (np.abs(np.diff(d, axis=0)) > max_step) & mask[1:] & mask[:-1]
+    dh = (np.abs(np.diff(d, axis=1)) > max_step) & mask[:, 1:] & mask[:, :-1]
+    # The farther pixel of a step is the one that is cut.
     far_v = d[1:] > d[:-1]
     jump[1:] |= dv & far_v
     jump[:-1] |= dv & ~far_v
@@ -184,6 +195,8 @@ def segment_person(
     max_depth_step: float = 0.15,
     min_pixels: int = 150,
     min_height: float = 0.4,
+    max_join_depth: float = 0.6,
+    max_extent: float = 2.6,
     rng: int | np.random.Generator | None = 0,
 ) -> np.ndarray:
     """The person's pixels in a depth frame.
@@ -191,7 +204,8 @@ def segment_person(
     Steps: depth gating to ``[min_depth, max_depth]``; the background model's
     foreground (static cameras); removal of a floor plane found by RANSAC; the
     largest connected component (joined across depth steps below
-    ``max_depth_step``) that is tall enough to be a person.
+    ``max_depth_step``) whose size fits a person, with the touching
+    components at a similar depth (a limb in front of the body).
 
     Parameters
     ----------
@@ -211,6 +225,12 @@ def segment_person(
         Fewest pixels of a person; smaller components are ignored.
     min_height : float
         Smallest physical extent (metres, image vertical) of a person.
+    max_extent : float
+        Largest height or width (metres) of a person; larger components are
+        background (walls, floor).
+    max_join_depth : float
+        Components touching the person in the image whose median depth is within
+        this many metres of the person's are joined to it (limbs in front of the body).
     rng : int, Generator or None
         Seeds the floor RANSAC.
 
@@ -252,6 +272,39 @@ def segment_person(
             height = points @ normal + offset
             on_floor = height < floor_threshold
             mask[pixels[on_floor, 0], pixels[on_floor, 1]] = False
+    # Work on the bounding box of the gated pixels (the person is a small part of a frame).
+    rows = np.nonzero(mask.any(axis=1))[0]
+    cols = np.nonzero(mask.any(axis=0))[0]
+    r0, r1 = max(rows[0] - 3, 0), min(rows[-1] + 4, mask.shape[0])
+    c0, c1 = max(cols[0] - 3, 0), min(cols[-1] + 4, mask.shape[1])
+    out = np.zeros_like(mask)
+    out[r0:r1, c0:c1] = _largest_person(
+        mask[r0:r1, c0:c1],
+        depth[r0:r1, c0:c1],
+        intrinsics,
+        max_depth_step=max_depth_step,
+        min_pixels=min_pixels,
+        min_height=min_height,
+        max_extent=max_extent,
+        max_join_depth=max_join_depth,
+    )
+    return out
+
+
+def _largest_person(
+    mask,
+    depth,
+    intrinsics,
+    *,
+    max_depth_step,
+    min_pixels,
+    min_height,
+    max_extent,
+    max_join_depth,
+) -> np.ndarray:
+    """The person-sized largest component of ``mask``, with limbs split off by depth steps."""
+    from scipy import ndimage
+
     labels, n = _components(mask, depth, max_depth_step)
     if n == 0:
         return np.zeros_like(mask)
@@ -259,25 +312,35 @@ def segment_person(
     counts[0] = 0
     order = np.argsort(counts)[::-1]
     chosen = 0
-    for lab in order[: min(n, 5)]:
+    for lab in order[: min(n, 8)]:
         if counts[lab] < min_pixels:
             break
-        rows = np.nonzero((labels == lab).any(axis=1))[0]
         if intrinsics is not None:
-            z = float(np.median(depth[labels == lab]))
-            extent = (rows[-1] - rows[0] + 1) * z / intrinsics.fy
-            if extent < min_height:
-                continue
+            comp = labels == lab
+            rows = np.nonzero(comp.any(axis=1))[0]
+            cols = np.nonzero(comp.any(axis=0))[0]
+            z = float(np.median(depth[comp]))
+            tall = (rows[-1] - rows[0] + 1) * z / intrinsics.fy
+            wide = (cols[-1] - cols[0] + 1) * z / intrinsics.fx
+            if tall < min_height or tall > max_extent or wide > max_extent:
+                continue  # too small, or a wall / the floor
         chosen = lab
         break
     if chosen == 0:
         return np.zeros_like(mask)
     person = labels == chosen
+    # Parts split off by depth steps (an arm in front of the chest) rejoin the person
+    # when they touch it in the image and lie at a similar depth.
+    z_person = float(np.median(depth[person]))
+    near = ndimage.binary_dilation(person, iterations=2)
+    touching = np.unique(labels[near & (labels > 0) & ~person])
+    for lab in touching:
+        part = labels == lab
+        if abs(float(np.median(depth[part])) - z_person) < max_join_depth:
+            person |= part
     # Give back the pixels cut at depth steps that touch the person and match its depth.
-    from scipy import ndimage
-
     ring = ndimage.binary_dilation(person) & mask & (labels == 0)
     if ring.any():
-        near = ndimage.grey_dilation(np.where(person, depth, 0.0), size=3)
-        person |= ring & (np.abs(depth - near) < max_depth_step)
+        near_depth = ndimage.grey_dilation(np.where(person, depth, 0.0), size=3)
+        person |= ring & (np.abs(depth - near_depth) < max_depth_step)
     return person

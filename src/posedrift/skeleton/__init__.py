@@ -34,10 +34,18 @@ __all__ = [
 
 from posedrift.skeleton._fit import (
     SkeletonFit,
+    bone_anchors,
     fit_skeleton,
     part_anchors,
     prior_bone_lengths,
 )
 from posedrift.skeleton._meanshift import part_modes
 
-__all__ += ["SkeletonFit", "fit_skeleton", "part_anchors", "part_modes", "prior_bone_lengths"]
+__all__ += [
+    "SkeletonFit",
+    "bone_anchors",
+    "fit_skeleton",
+    "part_anchors",
+    "part_modes",
+    "prior_bone_lengths",
+]

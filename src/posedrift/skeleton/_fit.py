@@ -444,3 +444,36 @@ def part_anchors(joints: np.ndarray, bone_lengths: np.ndarray) -> np.ndarray:
         shank_dir = _unit(an - kn)
         out[_P[f"{side}_foot"]] = an + 0.03 * shank_dir
     return out
+
+
+def bone_anchors(joints: np.ndarray, bone_lengths: np.ndarray, *, n: int = 3) -> np.ndarray:
+    """``n`` points along each part's bone, ``(15, n, 3)``: multi-source ``J_j`` for Algorithm 2.
+
+    The bones run between the part's two ends (``PART_JOINTS``; the pelvis is the
+    mean of the hips, hands and feet extend beyond the wrist and ankle), sampled
+    at ``(i + 0.5) / n`` of their length.
+    """
+    j = np.asarray(joints, dtype=float)
+    pelvis = 0.5 * (j[_J["right_hip"]] + j[_J["left_hip"]])
+    starts = np.full((N_PARTS, 3), np.nan)
+    ends = np.full((N_PARTS, 3), np.nan)
+    starts[_P["head"]], ends[_P["head"]] = j[_J["neck"]], j[_J["head"]]
+    starts[_P["upper_torso"]], ends[_P["upper_torso"]] = j[_J["neck"]], j[_J["torso"]]
+    starts[_P["lower_torso"]], ends[_P["lower_torso"]] = j[_J["torso"]], pelvis
+    for side in ("right", "left"):
+        sh, el, wr = j[_J[f"{side}_shoulder"]], j[_J[f"{side}_elbow"]], j[_J[f"{side}_hand"]]
+        hip, kn, an = j[_J[f"{side}_hip"]], j[_J[f"{side}_knee"]], j[_J[f"{side}_foot"]]
+        for part, a, b in (
+            ("upper_arm", sh, el),
+            ("forearm", el, wr),
+            ("thigh", hip, kn),
+            ("shank", kn, an),
+        ):
+            starts[_P[f"{side}_{part}"]], ends[_P[f"{side}_{part}"]] = a, b
+        hand_len = 0.74 * bone_lengths[_J[f"{side}_hand"]]
+        starts[_P[f"{side}_hand"]] = wr
+        ends[_P[f"{side}_hand"]] = wr + hand_len * _unit(wr - el)
+        starts[_P[f"{side}_foot"]] = an
+        ends[_P[f"{side}_foot"]] = an + 0.1 * bone_lengths[_J[f"{side}_foot"]] * _unit(an - kn)
+    t = (np.arange(n) + 0.5) / n
+    return starts[:, None, :] + t[None, :, None] * (ends - starts)[:, None, :]

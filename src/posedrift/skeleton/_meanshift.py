@@ -78,9 +78,9 @@ def part_modes(
     if not have.any():
         return (modes, counts) if return_counts else modes
     for d in range(3):
-        modes[have, d] = np.bincount(lab, weights=w * p[:, d], minlength=n_parts)[have] / counts[
-            have
-        ]
+        modes[have, d] = (
+            np.bincount(lab, weights=w * p[:, d], minlength=n_parts)[have] / counts[have]
+        )
     inv2h2 = 0.5 / bandwidth**2
     for _ in range(max_iter):
         r2 = ((p - modes[lab]) ** 2).sum(axis=1)
@@ -89,7 +89,9 @@ def part_modes(
         new = modes.copy()
         move = have & (den > 1e-12)
         for d in range(3):
-            new[move, d] = np.bincount(lab, weights=k * p[:, d], minlength=n_parts)[move] / den[move]
+            new[move, d] = (
+                np.bincount(lab, weights=k * p[:, d], minlength=n_parts)[move] / den[move]
+            )
         shift = np.nanmax(np.abs(new - modes)) if move.any() else 0.0
         modes = new
         if shift < tol:

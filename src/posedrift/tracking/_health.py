@@ -134,8 +134,11 @@ def assess(
         )
     if meas < min_measured:
         return Health(
-            False, f"only {100 * meas:.0f}% of the joints are supported by the labels", score,
-            unexplained, meas,
+            False,
+            f"only {100 * meas:.0f}% of the joints are supported by the labels",
+            score,
+            unexplained,
+            meas,
         )
     if sigma is not None and np.isfinite(sigma) and sigma > max_sigma:
         return Health(

@@ -61,7 +61,7 @@ def prior_reach(height: float) -> np.ndarray:
 
 
 def estimate_up(points: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """The body's upward direction: trunk axis oriented towards the head (camera ``-Y`` fallback)."""
+    """The body's upward direction: the trunk axis towards the head (else camera ``-Y``)."""
     up = np.array([0.0, -1.0, 0.0])
     torso = np.isin(labels, [_P["upper_torso"], _P["lower_torso"]])
     head = labels == _P["head"]
@@ -194,6 +194,9 @@ def smooth_labels(labels: np.ndarray, rows: np.ndarray, cols: np.ndarray, n_iter
     return labels
 
 
+REACH_QUANTILE = 95.0
+REACH_MARGIN = 0.05
+
 
 def measure_reach(
     graph,
@@ -202,8 +205,8 @@ def measure_reach(
     anchors: np.ndarray,
     *,
     height: float,
-    quantile: float = 90.0,
-    margin: float = 0.03,
+    quantile: float = REACH_QUANTILE,
+    margin: float = REACH_MARGIN,
     min_points: int = 5,
 ) -> np.ndarray:
     """``D_j`` of Algorithm 2 measured on a labelled frame, as a fraction of stature.
@@ -224,3 +227,120 @@ def measure_reach(
             value = (np.percentile(own, quantile) + margin) / height
             out[j] = float(np.clip(value, 0.7 * prior[j], 2.0 * prior[j]))
     return out
+
+
+def _segment_distances(points: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Distance ``(N, S)`` from each point to each segment."""
+    ab = ends - starts
+    denom = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12)
+    t = np.einsum("nsj,sj->ns", points[:, None, :] - starts[None], ab) / denom
+    closest = starts[None] + np.clip(t, 0.0, 1.0)[..., None] * ab[None]
+    return np.linalg.norm(points[:, None, :] - closest, axis=2)
+
+
+# Body radius of each part as a fraction of stature (for labelling by nearest bone).
+_PART_RADIUS = np.array(
+    [0.06, 0.095, 0.095, 0.03, 0.03, 0.025, 0.025, 0.02, 0.02, 0.05, 0.05, 0.035, 0.035, 0.02, 0.02]
+)
+
+
+def geometric_labels(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Body-part labels of an upright person facing the camera, without a forest.
+
+    A skeleton is laid over the points from anthropometric ratios
+    (``skeleton.SEGMENT_RATIOS``): stature from the vertical extent, trunk at the
+    median of the trunk band, each arm along the principal direction of the points
+    beside the trunk on its side (hanging, raised or in a T-pose: elbows taken as
+    straight), legs straight down to the lowest points; each point then takes the
+    part of the nearest bone (distance less the part's radius).
+
+    Parameters
+    ----------
+    points : (N, 3) float
+        Camera-frame points of the person (metres), upright, facing the camera.
+
+    Returns
+    -------
+    labels : (N,) int
+    joints : (15, 3) float
+        The skeleton used.
+    """
+    from posedrift.skeleton._definitions import SEGMENT_RATIOS
+    from posedrift.skeleton._fit import bone_anchors
+
+    points = np.asarray(points, dtype=float)
+    up = np.array([0.0, -1.0, 0.0])
+    c = points - points.mean(axis=0)
+    _, v = np.linalg.eigh(c.T @ c)
+    axis = v[:, 2] if v[:, 2] @ up >= 0 else -v[:, 2]
+    if axis @ up > np.cos(np.radians(30)):
+        up = axis
+    h = (points - points.mean(axis=0)) @ up
+    floor = np.percentile(h, 0.5)
+    height = float(np.clip(np.percentile(h, 99.5) - floor + 0.02, 0.9, 2.3))
+    h = h - floor
+    forward = np.array([0.0, 0.0, -1.0])  # the person faces the camera
+    right = np.cross(forward, up)  # the person's right, in the camera frame
+    right /= np.linalg.norm(right)
+    forward = np.cross(right, up)
+    r = SEGMENT_RATIOS
+    trunk = (h > r["hip_height"] * height) & (h < r["shoulder_height"] * height)
+    base = points.mean(axis=0) if not trunk.any() else np.median(points[trunk], axis=0)
+    lateral = (points - base) @ right
+    centre = base - ((base - points.mean(axis=0)) @ up) * up
+    depth = float(np.median(((points[trunk] if trunk.any() else points) - base) @ forward))
+
+    def at(height_frac: float, side: float, ahead: float = 0.0) -> np.ndarray:
+        return (
+            centre
+            + (floor + height_frac * height - (centre - points.mean(axis=0)) @ up) * up
+            + side * right
+            + (depth - ahead) * forward
+        )
+
+    # Joints sit about a limb radius behind the visible surface.
+    j = np.zeros((15, 3))
+    sh_h, hip_h = r["shoulder_height"], r["hip_height"]
+    half_sh, half_hip = 0.5 * r["shoulder_width"] * height, 0.5 * r["hip_width"] * height
+    j[_J["neck"]] = at(sh_h + 0.02, 0.0, 0.06)
+    j[_J["head"]] = at(1.0 - 0.5 * r["head_height"], 0.0, 0.07)
+    pelvis_h = hip_h
+    j[_J["torso"]] = at(0.5 * (sh_h + 0.02 + pelvis_h), 0.0, 0.08)
+    for sign, side in ((1.0, "right"), (-1.0, "left")):
+        shoulder = at(sh_h, sign * half_sh, 0.05)
+        # Each leg follows the points on its side of the body's midline.
+        leg = (sign * lateral > 0) & (h < hip_h * height)
+        knee_h, ankle_h = hip_h - r["thigh"], r["ankle_height"] + 0.03
+        offsets = []
+        for band_h in (knee_h, ankle_h):
+            band = leg & (np.abs(h - band_h * height) < 0.04 * height)
+            offsets.append(float(np.median(lateral[band])) if band.sum() >= 3 else sign * half_hip)
+        hip = at(hip_h, sign * half_hip, 0.07)
+        knee = at(knee_h, offsets[0], 0.05)
+        ankle = at(ankle_h - 0.03, offsets[1], 0.04)
+        j[_J[f"{side}_shoulder"]], j[_J[f"{side}_hip"]] = shoulder, hip
+        j[_J[f"{side}_knee"]], j[_J[f"{side}_foot"]] = knee, ankle
+        # The arm: points beside the trunk on this side, above the hips.
+        arm = (sign * lateral > half_sh * 0.85) & (h > hip_h * height * 0.8)
+        direction = -up
+        if arm.sum() >= 8:
+            a = points[arm] - shoulder
+            cov = a.T @ a
+            _, vv = np.linalg.eigh(cov)
+            d = vv[:, 2]
+            mean_dir = a.mean(axis=0)
+            d = d if d @ mean_dir >= 0 else -d
+            if np.linalg.norm(mean_dir) > 0.1 * height:
+                direction = d
+        elbow = shoulder + r["upper_arm"] * height * direction
+        wrist = elbow + r["forearm"] * height * direction
+        j[_J[f"{side}_elbow"]], j[_J[f"{side}_hand"]] = elbow, wrist
+    bones = np.zeros(15)
+    bones[_J["right_hand"]] = bones[_J["left_hand"]] = r["forearm"] * height
+    bones[_J["right_foot"]] = bones[_J["left_foot"]] = r["shank"] * height
+    anchors = bone_anchors(j, bones, n=2)
+    starts, ends = anchors[:, 0], anchors[:, -1]
+    # Stretch the sampled anchors back to the full bones.
+    mid, half = 0.5 * (starts + ends), 0.5 * (ends - starts) * 2.0
+    dist = _segment_distances(points, mid - half, mid + half) - _PART_RADIUS * height
+    return np.argmin(dist, axis=1).astype(np.int64), j

@@ -22,12 +22,13 @@ from posedrift.camera import DepthFrame, Intrinsics, backproject
 from posedrift.labelling._relabel import geodesic_graph, relabel
 from posedrift.points._downsample import downsample
 from posedrift.points._segment import BackgroundModel, segment_person
-from posedrift.skeleton._fit import SkeletonFit, fit_skeleton, part_anchors
+from posedrift.skeleton._fit import SkeletonFit, bone_anchors, fit_skeleton
 from posedrift.skeleton._meanshift import part_modes
 from posedrift.tracking._health import Health, assess
 from posedrift.tracking._init import (
     Calibration,
     calibrate,
+    geometric_labels,
     label_template_points,
     measure_reach,
     smooth_labels,
@@ -88,9 +89,12 @@ class PoseTracker:
     intrinsics : Intrinsics
     n_points : int
         Points per frame after uniform downsampling (the paper's about 400).
-    forest : BodyPartForest, optional
+    forest : BodyPartForest or "geometric", optional
         Labels the (re)initialization frames; any object with the same ``predict``
         works. Loaded lazily with ``BodyPartForest.load_default()`` when None.
+        ``"geometric"`` (also the fallback where no forest can be loaded) labels an
+        upright person facing the camera from body proportions alone
+        (:func:`posedrift.tracking._init.geometric_labels`).
     relabel : bool
         Apply Algorithm 2 (geodesic relabelling) every frame.
     registration : {"nonrigid", "rigid"}
@@ -99,11 +103,18 @@ class PoseTracker:
         ``"icp"``: nearest-neighbour correspondences after rigid ICP in the same
         loop (the ICP baseline).
     warm_start : bool
-        Start each registration from the previous frame's sigma^2.
+        Start each registration from the previous frame's sigma^2 (at least
+        ``start_sigma`` squared) instead of the closed-form, body-sized one.
     kernel_width, smoothness, outlier_weight : float
         beta, lambda and w of nonrigid CPD (normalized units).
     max_iter : int
         EM iterations per frame at most.
+    tol : float
+        CPD's relative tolerance on its objective.
+    start_sigma : float
+        Smallest starting sigma (metres) of a warm-started registration.
+    low_rank : int, optional
+        Rank of CPD's low-rank kernel (faster); None for the exact kernel.
     alpha : float
         Steepness (1/m) of Algorithm 2's sigmoid.
     height : float, optional
@@ -143,7 +154,11 @@ class PoseTracker:
         outlier_weight: float = 0.05,
         max_iter: int = 40,
         tol: float = 1e-4,
+        start_sigma: float = 0.02,
+        low_rank: int | None = None,
         alpha: float = 60.0,
+        relabel_mode: str = "gate",
+        evidence_floor: float = 0.05,
         height: float | None = None,
         background: BackgroundModel | None = None,
         segment_options: dict | None = None,
@@ -166,16 +181,34 @@ class PoseTracker:
                 f"The 'correspondence' parameter of {caller} must be 'cpd' or 'icp'. "
                 f"Got {correspondence!r} instead."
             )
-        self.n_points = check_scalar(n_points, "n_points", low=20, include_low=True,
-                                     integer=True, caller=caller)
+        self.n_points = check_scalar(
+            n_points, "n_points", low=20, include_low=True, integer=True, caller=caller
+        )
         self.kernel_width = check_scalar(kernel_width, "kernel_width", low=0.0, caller=caller)
         self.smoothness = check_scalar(smoothness, "smoothness", low=0.0, caller=caller)
-        self.outlier_weight = check_scalar(outlier_weight, "outlier_weight", low=0.0, high=1.0,
-                                           include_low=True, caller=caller)
-        self.max_iter = check_scalar(max_iter, "max_iter", low=1, include_low=True, integer=True,
-                                     caller=caller)
+        self.outlier_weight = check_scalar(
+            outlier_weight, "outlier_weight", low=0.0, high=1.0, include_low=True, caller=caller
+        )
+        self.max_iter = check_scalar(
+            max_iter, "max_iter", low=1, include_low=True, integer=True, caller=caller
+        )
         self.tol = check_scalar(tol, "tol", low=0.0, caller=caller)
+        self.start_sigma = check_scalar(start_sigma, "start_sigma", low=0.0, caller=caller)
+        if low_rank is not None:
+            low_rank = check_scalar(
+                low_rank, "low_rank", low=1, include_low=True, integer=True, caller=caller
+            )
+        self.low_rank = low_rank
         self.alpha = check_scalar(alpha, "alpha", low=0.0, caller=caller)
+        if relabel_mode not in ("gate", "paper"):
+            raise ValueError(
+                f"The 'relabel_mode' parameter of {caller} must be 'gate' or 'paper'. "
+                f"Got {relabel_mode!r} instead."
+            )
+        self.relabel_mode = relabel_mode
+        self.evidence_floor = check_scalar(
+            evidence_floor, "evidence_floor", low=0.0, include_low=True, caller=caller
+        )
         if height is not None:
             height = check_scalar(height, "height", low=0.5, high=2.6, caller=caller)
         self.height = height
@@ -195,11 +228,13 @@ class PoseTracker:
     def reset(self, intrinsics: Intrinsics) -> None:
         """Forget the track (and the calibration) and prepare for a new sequence."""
         self.intrinsics = intrinsics
-        self._rng = check_rng(self._seed if not isinstance(self._seed, np.random.Generator)
-                              else self._seed)
+        self._downsample_seed = int(check_rng(self._seed).integers(2**31))
+        self._last_joints: np.ndarray | None = None
+        self._last_centre: np.ndarray | None = None
         self._state: _State | None = None
         self._calibration: Calibration | None = None
         self._voxel: float | None = None
+        self._seed_registration = None
 
     @property
     def calibration(self) -> Calibration | None:
@@ -230,7 +265,7 @@ class PoseTracker:
         where = f"frame {frame.index}" + (f" ({frame.source})" if frame.source else "")
         try:
             return self._process(frame, where)
-        except Exception as exc:  # noqa: BLE001 - one bad frame must not end the sequence
+        except Exception as exc:
             if self._raise_errors:
                 raise
             self._state = None
@@ -250,7 +285,9 @@ class PoseTracker:
         if not np.any(depth > 0):
             self._state = None
             return FrameResult.empty(
-                frame.index, FrameStatus.NO_PERSON, f"{where}: no valid depth in the frame",
+                frame.index,
+                FrameStatus.NO_PERSON,
+                f"{where}: no valid depth in the frame",
                 timestamp=frame.timestamp,
             )
         mask = segment_person(frame, background=self.background, rng=0, **self.segment_options)
@@ -260,13 +297,20 @@ class PoseTracker:
         if n_mask < self.min_points:
             self._state = None
             return FrameResult.empty(
-                frame.index, FrameStatus.NO_PERSON,
+                frame.index,
+                FrameStatus.NO_PERSON,
                 f"{where}: no person found ({n_mask} foreground pixels)",
-                timestamp=frame.timestamp, timings_ms=timings,
+                timestamp=frame.timestamp,
+                timings_ms=timings,
             )
         full, pixels = backproject(depth, intr, mask)
+        # The same seed every frame: identical frames give identical points.
         points, self._voxel = downsample(
-            full, self.n_points, voxel_size=self._voxel, rng=self._rng, return_voxel_size=True
+            full,
+            self.n_points,
+            voxel_size=self._voxel,
+            rng=self._downsample_seed,
+            return_voxel_size=True,
         )
         t2 = time.perf_counter()
         timings["points"] = 1e3 * (t2 - t1)
@@ -290,22 +334,24 @@ class PoseTracker:
                 attempt = fresh
                 status = FrameStatus.REINITIALIZED
             if attempt is None or not attempt.health.ok:
-                reason = (
-                    "no usable body-part labels"
-                    if attempt is None
-                    else attempt.health.reason
-                )
+                reason = "no usable body-part labels" if attempt is None else attempt.health.reason
                 self._state = None
                 timings["total"] = 1e3 * (time.perf_counter() - t0)
                 return FrameResult.empty(
-                    frame.index, FrameStatus.LOST, f"{where}: no pose ({reason})",
-                    timestamp=frame.timestamp, timings_ms=timings,
+                    frame.index,
+                    FrameStatus.LOST,
+                    f"{where}: no pose ({reason})",
+                    timestamp=frame.timestamp,
+                    timings_ms=timings,
                 )
             if status is FrameStatus.TRACKED:
                 message = ""
         fit = attempt.fit
+        self._last_joints, self._last_centre = fit.joints, points.mean(axis=0)
         self._state = _State(
-            points=points, labels=attempt.labels, joints=fit.joints,
+            points=points,
+            labels=attempt.labels,
+            joints=fit.joints,
             registration=attempt.registration,
         )
         timings["total"] = 1e3 * (time.perf_counter() - t0)
@@ -332,24 +378,51 @@ class PoseTracker:
             return post, (lambda p: np.asarray(p) @ rot.T + trans), None, sigma
         from posedrift.registration import ConvergenceWarning, register_nonrigid, register_rigid
 
-        prev = self._state.registration if (self.warm_start and self._state) else None
-        if prev is not None and prev.kind != self.registration:
-            prev = None
+        prev = None
+        if self.warm_start and self.registration == "nonrigid":
+            # Start the EM at a small sigma^2 (the previous frame's, at least start_sigma):
+            # from a cold, body-sized sigma^2 the GMM first shrinks and then slides along
+            # the surface, which moves labels across part boundaries.
+            prev = self._state.registration if self._state is not None else None
+            if prev is None or prev.kind != "nonrigid":
+                prev = self._seed_result(source)
+            sigma2 = max(float(prev.sigma2), self.start_sigma**2)
+            prev = replace(prev, sigma2=sigma2)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
             if self.registration == "rigid":
                 res = register_rigid(
-                    source, target, outlier_weight=self.outlier_weight, tol=self.tol,
-                    max_iter=self.max_iter, warm_start=None,
+                    source,
+                    target,
+                    outlier_weight=self.outlier_weight,
+                    tol=self.tol,
+                    max_iter=self.max_iter,
+                    warm_start=None,
                 )
             else:
                 res = register_nonrigid(
-                    source, target, kernel_width=self.kernel_width, smoothness=self.smoothness,
-                    outlier_weight=self.outlier_weight, tol=self.tol, max_iter=self.max_iter,
+                    source,
+                    target,
+                    kernel_width=self.kernel_width,
+                    smoothness=self.smoothness,
+                    outlier_weight=self.outlier_weight,
+                    tol=self.tol,
+                    max_iter=self.max_iter,
                     warm_start=prev,
+                    low_rank=self.low_rank,
                 )
         post = res.transfer_labels(labels.astype(np.int64), N_PARTS)
         return post, res.apply, res, float(np.sqrt(max(res.sigma2, 0.0)))
+
+    def _seed_result(self, source: np.ndarray):
+        """A nonrigid result to carry the starting sigma^2 (the API's warm start)."""
+        from posedrift.registration import ConvergenceWarning, register_nonrigid
+
+        if self._seed_registration is None:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ConvergenceWarning)
+                self._seed_registration = register_nonrigid(source[:20], source[:20], max_iter=1)
+        return self._seed_registration
 
     def _track(self, points: np.ndarray, graph, timings: dict[str, float]) -> _Attempt:
         state, cal = self._state, self._calibration
@@ -368,10 +441,18 @@ class PoseTracker:
                 labels[empty] = labels[inl][nn]
         prediction = warp(state.joints)
         if self.relabel:
-            anchors = part_anchors(prediction, cal.bone_lengths)
+            anchors = bone_anchors(prediction, cal.bone_lengths)
             labels = relabel(
-                points, labels, anchors, height=cal.height, ratios=cal.reach,
-                alpha=self.alpha, evidence=post, graph=graph,
+                points,
+                labels,
+                anchors,
+                height=cal.height,
+                ratios=cal.reach,
+                alpha=self.alpha,
+                evidence=post,
+                graph=graph,
+                keep_plausible=self.relabel_mode == "gate",
+                evidence_floor=self.evidence_floor,
             )
         t2 = time.perf_counter()
         timings["relabel"] = 1e3 * (t2 - t1)
@@ -391,35 +472,52 @@ class PoseTracker:
         cal = self._calibration
         modes = part_modes(points, labels, bandwidth=0.06)
         fit = fit_skeleton(
-            points, labels, bone_lengths=cal.bone_lengths, edges=(graph.rows, graph.cols),
-            modes=modes, prediction=prediction, height=cal.height,
+            points,
+            labels,
+            bone_lengths=cal.bone_lengths,
+            edges=(graph.rows, graph.cols),
+            modes=modes,
+            prediction=prediction,
+            height=cal.height,
         )
         health = assess(points, labels, fit.joints, fit.measured, height=cal.height, sigma=sigma)
         return _Attempt(labels=labels, fit=fit, health=health)
 
     # ------------------------------------------------------------------ initialization
     def _get_forest(self):
+        """The forest, loaded on first use; "geometric" where none can be loaded."""
         if self.forest is None:
-            from posedrift.labelling import BodyPartForest
+            try:
+                from posedrift.labelling import BodyPartForest
 
-            self.forest = BodyPartForest.load_default()
+                self.forest = BodyPartForest.load_default()
+            except (OSError, ValueError, ImportError, AttributeError):
+                self.forest = "geometric"
         return self.forest
 
     def _initialize(self, depth, intr, mask, full, pixels, points, graph) -> _Attempt | None:
         """Label the frame with the forest, calibrate (first time) and fit a skeleton."""
-        pred = self._get_forest().predict(depth, mask, intr)
-        label_img = np.asarray(pred.labels)
-        pix_labels = label_img[pixels[:, 0], pixels[:, 1]].astype(np.int64)
-        if np.count_nonzero(pix_labels >= 0) < self.min_points:
-            return None
-        labels = label_template_points(points, full, pix_labels)
+        forest = self._get_forest()
+        if isinstance(forest, str) and forest == "geometric":
+            labels, _ = geometric_labels(points)
+        else:
+            pred = forest.predict(depth, mask, intr)
+            label_img = np.asarray(pred.labels)
+            pix_labels = label_img[pixels[:, 0], pixels[:, 1]].astype(np.int64)
+            if np.count_nonzero(pix_labels >= 0) < self.min_points:
+                return None
+            labels = label_template_points(points, full, pix_labels)
         labels = smooth_labels(labels, graph.rows, graph.cols)
         fresh_calibration = self._calibration is None
         if fresh_calibration:
             self._calibration = calibrate(
                 points, labels, (graph.rows, graph.cols), full_points=full, height=self.height
             )
-        attempt = self._fit(points, labels, graph, None)
+        # Joints the labels do not support come from the last pose, moved with the body.
+        guess = None
+        if self._last_joints is not None:
+            guess = self._last_joints + (points.mean(axis=0) - self._last_centre)
+        attempt = self._fit(points, labels, graph, guess)
         if fresh_calibration and not attempt.health.ok:
             # Keep no calibration from a frame that could not be fitted.
             cal, self._calibration = self._calibration, None
@@ -428,16 +526,21 @@ class PoseTracker:
         if not np.isfinite(attempt.fit.joints).all():
             return attempt
         cal = self._calibration
-        anchors = part_anchors(attempt.fit.joints, cal.bone_lengths)
+        anchors = bone_anchors(attempt.fit.joints, cal.bone_lengths)
         if fresh_calibration:
             reach = measure_reach(graph, points, labels, anchors, height=cal.height)
             self._calibration = cal = replace(cal, reach=reach)
         if self.relabel:  # Clean the forest's labels with Algorithm 2 and refit.
             labels2 = relabel(
-                points, labels, anchors, height=cal.height, ratios=cal.reach,
-                alpha=self.alpha, graph=graph,
+                points,
+                labels,
+                anchors,
+                height=cal.height,
+                ratios=cal.reach,
+                alpha=self.alpha,
+                graph=graph,
             )
-            again = self._fit(points, labels2, graph, attempt.fit.joints)
+            again = self._fit(points, labels2, graph, guess)
             if again.health.score <= attempt.health.score:
                 attempt = again
         return attempt

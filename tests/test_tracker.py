@@ -1,0 +1,168 @@
+"""The tracker: the per-frame loop, its statuses, and bad input."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from posedrift.camera import DepthFrame, camera_preset
+from posedrift.skeleton import joint_angles
+from posedrift.tracking import FrameResult, FrameStatus, PoseTracker
+
+K = camera_preset("kinect1-qvga")
+
+
+class LabelImages:
+    """A stand-in for the body-part forest with its interface: the rendered part labels.
+
+    Only the test holds the ground truth; the tracker sees depth frames and this
+    ``predict``, as it would see the forest's.
+    """
+
+    def __init__(self, sequence):
+        self._table = {
+            f.depth.tobytes(): lab
+            for f, lab in zip(sequence.frames, sequence.reference.labels, strict=True)
+        }
+        self.calls = 0
+
+    def predict(self, depth, mask, intrinsics):
+        self.calls += 1
+        key = np.asarray(depth, dtype=np.float32).tobytes()
+        labels = self._table[key].astype(np.int16) - 1
+        labels[~np.asarray(mask)] = -1
+        return SimpleNamespace(labels=labels)
+
+
+@pytest.fixture(scope="module")
+def sequence():
+    from posedrift.synthetic import build_sequence, procedural_motion
+
+    return build_sequence(procedural_motion(), n_frames=90, rng=0)
+
+
+def _run(tracker, frames):
+    return [tracker.process(f) for f in frames]
+
+
+def test_identity_same_frame_twice_gives_same_joints(sequence):
+    tracker = PoseTracker(K, forest=LabelImages(sequence))
+    first = tracker.process(sequence.frames[0])
+    again = tracker.process(sequence.frames[0])
+    assert first.status is FrameStatus.REINITIALIZED
+    assert again.status is FrameStatus.TRACKED
+    assert np.abs(again.joints - first.joints).max() < 0.005  # metres
+    np.testing.assert_array_equal(again.points, first.points)
+
+
+def test_tracks_a_synthetic_sequence(sequence):
+    forest = LabelImages(sequence)
+    tracker = PoseTracker(K, forest=forest)
+    frames = sequence.frames[::2]  # 45 frames at 15 fps: larger motion per frame
+    results = _run(tracker, frames)
+    assert all(isinstance(r, FrameResult) for r in results)
+    assert all(r.has_pose for r in results)
+    statuses = [r.status for r in results]
+    assert statuses[0] is FrameStatus.REINITIALIZED
+    assert statuses.count(FrameStatus.TRACKED) >= 0.8 * len(results)
+    est = np.array([r.joints for r in results])
+    truth = sequence.reference.joints[::2]
+    errors = np.abs(joint_angles(est) - sequence.reference.angles[::2])
+    assert np.nanmean(errors) < 8.0  # degrees (the paper reports 6.26 on its own data)
+    assert np.mean(np.linalg.norm(est - truth, axis=2) < 0.10) > 0.85
+    for r in results:
+        assert set(r.timings_ms) >= {"segment", "points", "total"}
+        assert len(r.points) == len(r.labels) == 400
+        assert not r.joints.flags.writeable
+
+
+def _bad_frames(index):
+    zeros = np.zeros(K.shape, np.float32)
+    nan = np.full(K.shape, np.nan, np.float32)
+    speck = zeros.copy()
+    speck[100:104, 100:104] = 2.0
+    noise = np.random.default_rng(0).uniform(0, 8, K.shape).astype(np.float32)
+    return [
+        DepthFrame(zeros, K, index=index, source="zeros"),
+        DepthFrame(nan, K, index=index + 1, source="nan"),
+        DepthFrame(speck, K, index=index + 2, source="speck"),
+        DepthFrame(noise, K, index=index + 3, source="noise"),
+    ]
+
+
+def test_bad_frames_get_a_status_and_the_track_resumes(sequence):
+    forest = LabelImages(sequence)
+    tracker = PoseTracker(K, forest=forest)
+    _run(tracker, sequence.frames[:5])
+    bad = _run(tracker, _bad_frames(5))
+    for r in bad:
+        assert r.status in (FrameStatus.NO_PERSON, FrameStatus.LOST)
+        assert not r.has_pose
+        assert f"frame {r.index}" in r.message
+    assert bad[0].status is FrameStatus.NO_PERSON and bad[1].status is FrameStatus.NO_PERSON
+    after = tracker.process(sequence.frames[5])
+    assert after.status is FrameStatus.REINITIALIZED
+    err = np.abs(after.angles - sequence.reference.angles[5])
+    assert np.nanmean(err) < 8.0
+
+
+def test_person_leaving_and_reentering(sequence):
+    tracker = PoseTracker(K, forest=LabelImages(sequence))
+    results = _run(tracker, sequence.frames[:10])
+    gone = DepthFrame(np.zeros(K.shape, np.float32), K, index=10)
+    results += _run(tracker, [gone, gone])
+    results += _run(tracker, sequence.frames[12:20])
+    statuses = [r.status for r in results]
+    assert statuses[10] is FrameStatus.NO_PERSON and statuses[11] is FrameStatus.NO_PERSON
+    assert statuses[12] is FrameStatus.REINITIALIZED
+    assert all(s is FrameStatus.TRACKED for s in statuses[13:])
+
+
+def test_lost_track_is_reinitialized(sequence):
+    forest = LabelImages(sequence)
+    tracker = PoseTracker(K, forest=forest)
+    _run(tracker, sequence.frames[:3])
+    # A jump of 30 frames (a second of motion) in one step: re-initialize or keep tracking,
+    # but never end the sequence and never return a pose far from the truth.
+    r = tracker.process(sequence.frames[60])
+    assert r.status in (FrameStatus.TRACKED, FrameStatus.REINITIALIZED)
+    assert r.has_pose
+
+
+def test_ablation_options_run(sequence):
+    for options in (
+        {"registration": "rigid"},
+        {"correspondence": "icp"},
+        {"relabel": False},
+        {"warm_start": False, "n_points": 200},
+    ):
+        tracker = PoseTracker(K, forest=LabelImages(sequence), **options)
+        results = _run(tracker, sequence.frames[:4])
+        assert results[0].status is FrameStatus.REINITIALIZED
+        assert all(r.has_pose or r.status is FrameStatus.LOST for r in results)
+        assert len(results[1].points) == options.get("n_points", 400)
+
+
+def test_errors_and_protocol(sequence):
+    with pytest.raises(ValueError, match="'registration' parameter of PoseTracker"):
+        PoseTracker(K, registration="affine-ish")
+    with pytest.raises(ValueError, match="'correspondence' parameter of PoseTracker"):
+        PoseTracker(K, correspondence="magic")
+    with pytest.raises(ValueError, match="'n_points' parameter of PoseTracker"):
+        PoseTracker(K, n_points=5)
+    with pytest.raises(ValueError, match="'intrinsics' argument of PoseTracker"):
+        PoseTracker((1, 2, 3))
+    tracker = PoseTracker(K, forest=LabelImages(sequence))
+    assert tracker.name == "cpd"
+    with pytest.raises(ValueError, match="must be a DepthFrame"):
+        tracker.process(np.zeros(K.shape))
+    with pytest.raises(ValueError, match="shape"):
+        DepthFrame(np.zeros((10, 10), np.float32), K)  # wrong shape: rejected by DepthFrame
+    tracker.process(sequence.frames[0])
+    assert tracker.calibration is not None
+    assert 1.5 < tracker.calibration.height < 2.0
+    tracker.reset(K)
+    assert tracker.calibration is None
+    assert tracker.process(sequence.frames[1]).status is FrameStatus.REINITIALIZED
