@@ -40,7 +40,7 @@ class LabelImages:
 def sequence():
     from posedrift.synthetic import build_sequence, procedural_motion
 
-    return build_sequence(procedural_motion(), n_frames=90, rng=0)
+    return build_sequence(procedural_motion(), n_frames=62, rng=0)
 
 
 def _run(tracker, frames):
@@ -57,10 +57,11 @@ def test_identity_same_frame_twice_gives_same_joints(sequence):
     np.testing.assert_array_equal(again.points, first.points)
 
 
+@pytest.mark.slow
 def test_tracks_a_synthetic_sequence(sequence):
     forest = LabelImages(sequence)
     tracker = PoseTracker(K, forest=forest)
-    frames = sequence.frames[::2]  # 45 frames at 15 fps: larger motion per frame
+    frames = sequence.frames[::2]  # 31 frames at 15 fps: larger motion per frame
     results = _run(tracker, frames)
     assert all(isinstance(r, FrameResult) for r in results)
     assert all(r.has_pose for r in results)
@@ -95,7 +96,7 @@ def _bad_frames(index):
 def test_bad_frames_get_a_status_and_the_track_resumes(sequence):
     forest = LabelImages(sequence)
     tracker = PoseTracker(K, forest=forest)
-    _run(tracker, sequence.frames[:5])
+    _run(tracker, sequence.frames[:2])
     bad = _run(tracker, _bad_frames(5))
     for r in bad:
         assert r.status in (FrameStatus.NO_PERSON, FrameStatus.LOST)
@@ -110,14 +111,14 @@ def test_bad_frames_get_a_status_and_the_track_resumes(sequence):
 
 def test_person_leaving_and_reentering(sequence):
     tracker = PoseTracker(K, forest=LabelImages(sequence))
-    results = _run(tracker, sequence.frames[:10])
-    gone = DepthFrame(np.zeros(K.shape, np.float32), K, index=10)
+    results = _run(tracker, sequence.frames[:3])
+    gone = DepthFrame(np.zeros(K.shape, np.float32), K, index=3)
     results += _run(tracker, [gone, gone])
-    results += _run(tracker, sequence.frames[12:20])
+    results += _run(tracker, sequence.frames[5:9])
     statuses = [r.status for r in results]
-    assert statuses[10] is FrameStatus.NO_PERSON and statuses[11] is FrameStatus.NO_PERSON
-    assert statuses[12] is FrameStatus.REINITIALIZED
-    assert all(s is FrameStatus.TRACKED for s in statuses[13:])
+    assert statuses[3] is FrameStatus.NO_PERSON and statuses[4] is FrameStatus.NO_PERSON
+    assert statuses[5] is FrameStatus.REINITIALIZED
+    assert all(s is FrameStatus.TRACKED for s in statuses[6:])
 
 
 def test_lost_track_is_reinitialized(sequence):
@@ -131,6 +132,7 @@ def test_lost_track_is_reinitialized(sequence):
     assert r.has_pose
 
 
+@pytest.mark.slow
 def test_ablation_options_run(sequence):
     for options in (
         {"registration": "rigid"},

@@ -52,13 +52,11 @@ class BackgroundModel:
                 f"2-D depth images. Got shape {stack.shape}."
             )
         stack = np.where(np.isfinite(stack) & (stack > 0), stack, np.nan)
-        with np.errstate(all="ignore"):
-            import warnings
-
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                bg = np.nanquantile(stack, self.quantile, axis=0)
-        self.depth_ = np.nan_to_num(bg, nan=0.0).astype(np.float32)
+        count = np.sum(~np.isnan(stack), axis=0)
+        ordered = np.sort(stack, axis=0)  # NaN (no measurement) sorts last
+        index = np.floor(self.quantile * np.maximum(count - 1, 0)).astype(np.intp)
+        bg = np.take_along_axis(ordered, index[None], axis=0)[0]
+        self.depth_ = np.where(count > 0, bg, 0.0).astype(np.float32)
         return self
 
     def foreground(self, depth: np.ndarray) -> np.ndarray:

@@ -83,7 +83,7 @@ def assess(
     *,
     height: float,
     sigma: float | None = None,
-    max_unexplained: float = 0.25,
+    max_unexplained: float = 0.2,
     max_sigma: float = 0.08,
     min_measured: float = 0.5,
     slack: float = 0.06,

@@ -333,7 +333,8 @@ class PoseTracker:
             ):
                 attempt = fresh
                 status = FrameStatus.REINITIALIZED
-            if attempt is None or not attempt.health.ok:
+            usable = attempt is not None and np.isfinite(attempt.fit.joints).all()
+            if not usable:
                 reason = "no usable body-part labels" if attempt is None else attempt.health.reason
                 self._state = None
                 timings["total"] = 1e3 * (time.perf_counter() - t0)
@@ -344,8 +345,11 @@ class PoseTracker:
                     timestamp=frame.timestamp,
                     timings_ms=timings,
                 )
-            if status is FrameStatus.TRACKED:
-                message = ""
+            if not attempt.health.ok:
+                # Neither the track nor a re-initialization is convincing: keep the
+                # better one, with less confidence.
+                message = f"{where}: doubtful pose ({attempt.health.reason})"
+                attempt.fit = replace(attempt.fit, confidence=0.5 * attempt.fit.confidence)
         fit = attempt.fit
         self._last_joints, self._last_centre = fit.joints, points.mean(axis=0)
         self._state = _State(
@@ -364,7 +368,7 @@ class PoseTracker:
             labels=attempt.labels,
             timestamp=frame.timestamp,
             timings_ms=timings,
-            message=message if status is FrameStatus.REINITIALIZED else "",
+            message=message,
         )
 
     def _register(self, source: np.ndarray, target: np.ndarray, labels: np.ndarray):
