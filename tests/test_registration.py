@@ -340,3 +340,86 @@ def test_works_without_the_compiled_extension(body, monkeypatch):
     assert not _estep.has_compiled_kernel()
     without = register_nonrigid(body, target)
     np.testing.assert_allclose(without.moved, with_ext.moved, atol=1e-9)
+
+
+# --------------------------------------------------------------------------- fast paths
+def _noisy_problem(body, seed=21):
+    rng = np.random.default_rng(seed)
+    truth = _smooth_warp(body)
+    return truth, _with_outliers(truth + rng.normal(scale=0.002, size=body.shape), 0.1, rng=seed)
+
+
+def test_accelerated_em_matches_plain_em_in_fewer_iterations(body):
+    truth, target = _noisy_problem(body)
+    plain = register_nonrigid(body, target, tol=1e-8, max_iter=400)
+    fast = register_nonrigid(body, target, tol=1e-8, max_iter=400, accelerate=True)
+    assert fast.converged and plain.converged
+    assert fast.iterations < 0.8 * plain.iterations
+    assert _rms(fast.moved, plain.moved) < 1e-5  # 0.01 mm: the same fixed point
+    assert fast.objective <= plain.objective + 1e-6 * abs(plain.objective)
+    assert fast.sigma2 == pytest.approx(plain.sigma2, rel=1e-3)
+    # at the default tolerance both stop within 0.1 mm of each other and of the truth
+    a = register_nonrigid(body, target)
+    b = register_nonrigid(body, target, accelerate=True)
+    assert _rms(a.moved, b.moved) < 1e-4 and _rms(b.moved, truth) < 2e-3
+    np.testing.assert_allclose(b.apply(body), b.moved, atol=1e-9)
+    # warm start and acceleration together
+    warm = register_nonrigid(body, target, accelerate=True, warm_start=a)
+    assert _rms(warm.moved, truth) < 2e-3
+
+
+def test_accelerated_em_max_iter_counts_m_steps(body):
+    with pytest.warns(ConvergenceWarning, match="max_iter=5"):
+        res = register_nonrigid(body, _smooth_warp(body), max_iter=5, accelerate=True)
+    assert res.iterations == 5 and not res.converged
+
+
+def test_auto_low_rank_picks_by_kernel_and_matches_exact(body):
+    _, target = _noisy_problem(body)
+    exact = register_nonrigid(body, target, low_rank=None)
+    auto = register_nonrigid(body, target, low_rank="auto")
+    assert auto._landmarks is not None  # kernel_width=2: the 64-landmark factor
+    assert _rms(auto.moved, exact.moved) < 1e-4  # 0.1 mm
+    # the low-rank field is the one fitted: apply(source) reproduces moved
+    np.testing.assert_allclose(auto.apply(body), auto.moved, atol=1e-9)
+    np.testing.assert_allclose(auto.apply(body + 0.01), exact.apply(body + 0.01), atol=5e-4)
+    # a narrow kernel is not low rank: "auto" keeps the exact solve
+    narrow = register_nonrigid(body, target, low_rank="auto", kernel_width=0.3)
+    assert narrow._landmarks is None
+    ref = register_nonrigid(body, target, kernel_width=0.3)
+    np.testing.assert_allclose(narrow.moved, ref.moved, atol=1e-12)
+    small = register_nonrigid(body[:50], target, low_rank="auto")  # few points: exact
+    assert small._landmarks is None
+    with pytest.raises(ValueError, match="'low_rank'.*'auto'"):
+        register_nonrigid(body, target, low_rank="fast")
+
+
+def test_m_steps_solve_the_cpd_system():
+    from posedrift.registration import _cpd
+
+    rng = np.random.default_rng(3)
+    y = rng.normal(size=(150, 3))
+    g = _cpd.gaussian_kernel(y, y, 1.5)
+    p1 = rng.uniform(0.0, 2.0, size=150)
+    p1[:4] = 0.0  # source points with no posterior mass
+    px = p1[:, None] * (y + 0.05 * rng.normal(size=y.shape))
+    s2, lam = 0.02, 2.0
+    work = np.full_like(g, np.nan)  # the buffer is overwritten, never read
+    w = _cpd._solve_nonrigid(g, None, p1, px, y, s2, lam, work)
+    # dP1 G W + lambda s2 W = P X - dP1 Y
+    resid = p1[:, None] * (g @ w) + lam * s2 * w - (px - p1[:, None] * y)
+    assert np.abs(resid).max() < 1e-10 * max(1.0, np.abs(px).max())
+    # the Woodbury M-step with an exact factor Z Z' = G gives the same W
+    ev, u = np.linalg.eigh(g)
+    keep = ev > 1e-13 * ev[-1]
+    z = u[:, keep] * np.sqrt(ev[keep])
+    w_lr = _cpd._solve_nonrigid(None, z, p1, px, y, s2, lam)
+    np.testing.assert_allclose(g @ w_lr, g @ w, atol=1e-8)
+    # the loop's low-rank step returns Z' W (K' x D) of that same W
+    u = _cpd._solve_low_rank(z, p1, px, y, lam * s2)
+    np.testing.assert_allclose(u, z.T @ w_lr, atol=1e-8)
+    # the Nyström factor of a wide kernel (landmarks numerically dependent, as
+    # low_rank="auto" requires) reproduces G to 1e-4 (G's entries are in (0, 1])
+    zn, land, proj, kept = _cpd.low_rank_factor(y, 5.0, 64)
+    assert kept <= 0.8 * 64 and land.shape == (64, 3) and proj.shape == (64, kept)
+    assert np.abs(zn @ zn.T - _cpd.gaussian_kernel(y, y, 5.0)).max() < 1e-4

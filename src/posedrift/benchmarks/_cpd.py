@@ -3,7 +3,7 @@
 ``run_cpd_benchmark(sizes, threads=..., repeats=..., rng=...)`` builds, per size, a
 humanoid-shaped source (:func:`posedrift.points.sample_humanoid`), a smooth warp of it,
 noise and 10% outliers, and times every implementation on the same arrays: median
-wall time, iterations, RMS error of the moved source to the true warped positions, and
+wall and CPU (``time.process_time``) time, iterations, RMS error of the moved source to the true warped positions, and
 peak memory (tracemalloc, which sees NumPy allocations). It also measures a realistic
 frame-to-frame pair cold and warm-started.
 
@@ -141,7 +141,7 @@ def rms(a: np.ndarray, b: np.ndarray) -> float:
 
 
 # --------------------------------------------------------------------------- runners
-def _run_posedrift(low_rank=None, compiled=True, smoothness=LAMBDA):
+def _run_posedrift(low_rank=None, compiled=True, smoothness=LAMBDA, accelerate=False):
     def run(source, target):
         from posedrift.registration import ConvergenceWarning, register_nonrigid
 
@@ -157,6 +157,7 @@ def _run_posedrift(low_rank=None, compiled=True, smoothness=LAMBDA):
                 max_iter=MAX_ITER,
                 low_rank=low_rank,
                 compiled=compiled,
+                accelerate=accelerate,
             )
         return res.moved, res.iterations
 
@@ -225,6 +226,14 @@ def implementations(
     else:
         impls["posedrift"] = (None, "exact dense solve above 3000 points: see low_rank")
     impls["posedrift-lowrank100"] = (_run_posedrift(100), None)
+    if size <= 3000:
+        impls["posedrift-accel"] = (_run_posedrift(None, accelerate=True), None)
+    impls["posedrift-auto-accel"] = (_run_posedrift("auto", accelerate=True), None)
+    if size > 400:
+        impls["posedrift-auto-accel-scaled-smoothness"] = (
+            _run_posedrift("auto", smoothness=LAMBDA * size / 400, accelerate=True),
+            None,
+        )
     if size > 400:
         # CPD's regularizer weakens as M grows (G's eigenvalues grow with M): the same
         # prior strength as smoothness=2 at 400 points is 2 M / 400
@@ -262,14 +271,15 @@ def implementations(
 
 def _measure(run, source, target, truth, repeats, first=None):
     """Median of ``repeats`` timed runs (or the single run ``first`` = (time, output))."""
-    times, moved, iters = [], None, -1
+    times, cpu, moved, iters = [], [], None, -1
     if first is not None:
-        times, (moved, iters) = [first[0]], first[1]
+        times, cpu, (moved, iters) = [first[0]], [first[1]], first[2]
         repeats = 0
     for _ in range(repeats):
         gc.collect()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         moved, iters = run(source, target)
+        cpu.append(time.process_time() - c0)
         times.append(time.perf_counter() - t0)
     gc.collect()
     tracemalloc.start()
@@ -279,6 +289,7 @@ def _measure(run, source, target, truth, repeats, first=None):
     return {
         "median_s": statistics.median(times),
         "min_s": min(times),
+        "cpu_median_s": statistics.median(cpu),
         "repeats": len(times),
         "iterations": int(iters),
         "rms_m": rms(np.asarray(moved), truth),
@@ -294,32 +305,49 @@ def _thread_limits(threads: int | None):
     return threadpool_limits(limits=threads)
 
 
-def frame_to_frame(n_points: int = 400, *, repeats: int = 5, rng=0) -> dict:
+FRAME_CONFIGS = {
+    # name: options of register_nonrigid beyond the benchmark's beta, lambda, w
+    "": {"low_rank": None, "tol": TOL},  # the defaults: keys "cold" and "warm"
+    "lowrank100": {"low_rank": 100, "tol": TOL},
+    "auto-accel": {"low_rank": "auto", "accelerate": True, "tol": TOL},
+    "auto-accel-tol1e-4": {"low_rank": "auto", "accelerate": True, "tol": 1e-4},
+}
+
+
+def frame_to_frame(
+    n_points: int = 400, *, repeats: int = 5, rng=0, configs: Sequence[str] | None = None
+) -> dict:
     """Cold vs warm-started registration of consecutive frames (the tracker's case).
 
-    Measured for the exact solve (``cold``, ``warm``) and for ``low_rank=100``
-    (``cold_lowrank100``, ``warm_lowrank100``).
+    Three frames of :func:`make_frame_pair`; the first pair is registered with the
+    same options, the second pair cold and warm-started from the first result. For
+    each configuration of :data:`FRAME_CONFIGS` (all by default) the keys ``cold_<name>``
+    and ``warm_<name>`` (``cold`` and ``warm`` for the defaults) hold median wall and
+    CPU (``time.process_time``) seconds, iterations and RMS to the true positions.
     """
     from posedrift.registration import ConvergenceWarning, register_nonrigid
 
     pair = make_frame_pair(n_points, rng)
     f0, f1, f2 = pair["frames"]
-    kw = dict(kernel_width=BETA, smoothness=LAMBDA, outlier_weight=W, tol=TOL, max_iter=MAX_ITER)
+    base = dict(kernel_width=BETA, smoothness=LAMBDA, outlier_weight=W, max_iter=MAX_ITER)
     out = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
-        for suffix, low_rank in (("", None), ("_lowrank100", 100)):
-            prev = register_nonrigid(f0, f1, low_rank=low_rank, **kw)
+        for name in FRAME_CONFIGS if configs is None else configs:
+            kw = {**base, **FRAME_CONFIGS[name]}
+            prev = register_nonrigid(f0, f1, **kw)
             for mode in ("cold", "warm"):
                 ws = prev if mode == "warm" else None
-                times = []
+                times, cpu = [], []
                 res = None
                 for _ in range(repeats):
-                    t0 = time.perf_counter()
-                    res = register_nonrigid(f1, f2, warm_start=ws, low_rank=low_rank, **kw)
+                    t0, c0 = time.perf_counter(), time.process_time()
+                    res = register_nonrigid(f1, f2, warm_start=ws, **kw)
+                    cpu.append(time.process_time() - c0)
                     times.append(time.perf_counter() - t0)
-                out[mode + suffix] = {
+                out[f"{mode}_{name}" if name else mode] = {
                     "median_s": statistics.median(times),
+                    "cpu_median_s": statistics.median(cpu),
                     "iterations": res.iterations,
                     "rms_m": rms(res.moved, pair["truth12"]),
                 }
@@ -406,15 +434,15 @@ def run_cpd_benchmark(
                         continue
                     if progress:
                         progress(f"{name} M={size} threads={row['threads']}")
-                    t0 = time.perf_counter()
+                    t0, c0 = time.perf_counter(), time.process_time()
                     try:
                         out = run(prob["source"], prob["target"])  # warm-up (imports, caches)
                     except Exception as exc:  # a broken peer is reported, not fatal
                         results.append({**row, "skipped": f"{type(exc).__name__}: {exc}"})
                         continue
-                    once = time.perf_counter() - t0
+                    once, once_cpu = time.perf_counter() - t0, time.process_time() - c0
                     # a slow run (over 5 s) is timed once: its warm-up is the measurement
-                    first = (once, out) if once > 5.0 else None
+                    first = (once, once_cpu, out) if once > 5.0 else None
                     src, tgt, truth = prob["source"], prob["target"], prob["truth"]
                     results.append({**row, **_measure(run, src, tgt, truth, repeats, first)})
         finally:
@@ -449,19 +477,20 @@ def run_cpd_benchmark(
 def markdown_table(report: dict) -> str:
     """The results as a Markdown table."""
     lines = [
-        "| size M | threads | implementation | median time (s) | iterations | RMS (mm) "
-        "| peak memory (MiB) |",
-        "|---:|---:|---|---:|---:|---:|---:|",
+        "| size M | threads | implementation | median wall (s) | median CPU (s) | iterations "
+        "| RMS (mm) | peak memory (MiB) |",
+        "|---:|---:|---|---:|---:|---:|---:|---:|",
     ]
     for r in report["results"]:
         if "skipped" in r:
             lines.append(
-                f"| {r['size']} | {r['threads']} | {r['impl']} | skipped: {r['skipped']} | | | |"
+                f"| {r['size']} | {r['threads']} | {r['impl']} | skipped: {r['skipped']} | | | | |"
             )
             continue
         it = r["iterations"] if r["iterations"] >= 0 else "n/a"
         lines.append(
-            f"| {r['size']} | {r['threads']} | {r['impl']} | {r['median_s']:.4f} | {it} | "
+            f"| {r['size']} | {r['threads']} | {r['impl']} | {r['median_s']:.4f} | "
+            f"{r.get('cpu_median_s', float('nan')):.4f} | {it} | "
             f"{1000 * r['rms_m']:.2f} | {r['peak_mib']:.1f} |"
         )
     f2f = report.get("frame_to_frame")
@@ -472,15 +501,15 @@ def markdown_table(report: dict) -> str:
             "1 thread; "
             f"no-motion RMS {1000 * f2f['no_motion_rms_m']:.1f} mm):",
             "",
-            "| start | median time (ms) | iterations | RMS (mm) |",
-            "|---|---:|---:|---:|",
+            "| start_config | median wall (ms) | median CPU (ms) | iterations | RMS (mm) |",
+            "|---|---:|---:|---:|---:|",
         ]
-        for mode in ("cold", "warm", "cold_lowrank100", "warm_lowrank100"):
-            if mode not in f2f:
+        for mode, r in f2f.items():
+            if not isinstance(r, dict):
                 continue
-            r = f2f[mode]
             lines.append(
-                f"| {mode} | {1000 * r['median_s']:.2f} | {r['iterations']} | "
+                f"| {mode} | {1000 * r['median_s']:.2f} | "
+                f"{1000 * r.get('cpu_median_s', float('nan')):.2f} | {r['iterations']} | "
                 f"{1000 * r['rms_m']:.2f} |"
             )
     return "\n".join(lines) + "\n"

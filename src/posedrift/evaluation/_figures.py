@@ -37,9 +37,10 @@ def angle_figure(run, sequence: str, path: Path) -> Path:
     record = next(r for r in run.sequences if r.name == sequence)
     ref = record.reference.angles
     frames = np.arange(len(ref))
+    kind = "ground truth" if record.reference.kind == "synthetic" else "Kinect reference"
     fig, axes = plt.subplots(4, 2, figsize=(13, 11), sharex=True)
     for k, (ax, name) in enumerate(zip(axes.T.ravel(), ANGLE_NAMES, strict=True)):
-        ax.plot(frames, ref[:, k], "k--", lw=1.6, label="ground truth")
+        ax.plot(frames, ref[:, k], "k--", lw=1.6, label=kind)
         for i, method in enumerate(run.methods):
             est = run.runs[(method, sequence)].angles[:, k]
             ax.plot(frames, est, color=_COLOURS[i % len(_COLOURS)], lw=0.9, label=method)
@@ -50,7 +51,6 @@ def angle_figure(run, sequence: str, path: Path) -> Path:
     for ax in axes[-1]:
         ax.set_xlabel("frame")
     axes[0, 0].legend(loc="lower left", fontsize=8, ncol=2)
-    kind = "ground truth" if record.reference.kind == "synthetic" else "Kinect reference"
     fig.suptitle(f"Estimated (solid) and {kind} (dashed) joint angles: {sequence}")
     fig.tight_layout(rect=(0, 0, 1, 0.97))
     fig.savefig(path, dpi=80)
@@ -90,44 +90,44 @@ def _crop(images: list[np.ndarray], margin: int = 8) -> tuple[slice, slice]:
     )
 
 
-def relabel_snapshots(
-    frames, wanted: list[int], *, forest=None, intrinsics: Intrinsics | None = None
-) -> dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """The tracker's labels just before and after its geodesic relabelling, on some frames.
+class observe_relabel:
+    """Record the tracker's labels just before and after its geodesic relabelling.
 
-    Runs a fresh :class:`~posedrift.tracking.PoseTracker` (the ``cpd`` method) over
-    the frames up to the last wanted one, with its call of
-    :func:`posedrift.labelling.relabel` observed (a debug hook from outside: the
-    tracker does not expose these labels). Returns ``{frame: (points, before,
-    after)}``; empty if the tracker cannot be observed.
+    A debug hook from outside (the tracker does not expose these labels): while the
+    context is open, :func:`posedrift.labelling.relabel` as called by
+    :mod:`posedrift.tracking._tracker` is observed, and each call's ``(points,
+    before, after)`` is appended to :attr:`calls`. Does nothing if the tracker
+    cannot be observed.
     """
-    import posedrift.tracking._tracker as tracker_module
-    from posedrift.tracking import PoseTracker
 
-    original = getattr(tracker_module, "relabel", None)
-    if original is None or not frames or not wanted:
-        return {}
-    calls: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    def __init__(self) -> None:
+        self.calls: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self._module = None
+        self._original = None
 
-    def observed(points, labels, *args, **kwargs):
-        out = original(points, labels, *args, **kwargs)
-        after = out[0] if isinstance(out, tuple) else out
-        calls.append((np.array(points), np.array(labels), np.array(after)))
-        return out
+    def __enter__(self) -> observe_relabel:
+        try:
+            import posedrift.tracking._tracker as module
+        except ImportError:
+            return self
+        original = getattr(module, "relabel", None)
+        if original is None:
+            return self
+        calls = self.calls
 
-    snapshots = {}
-    tracker_module.relabel = observed
-    try:
-        tracker = PoseTracker(intrinsics or frames[0].intrinsics, forest=forest)
-        last = max(wanted)
-        for frame in frames[: last + 1]:
-            calls.clear()
-            tracker.process(frame)
-            if frame.index in wanted and calls:
-                snapshots[frame.index] = calls[-1]
-    finally:
-        tracker_module.relabel = original
-    return snapshots
+        def observed(points, labels, *args, **kwargs):
+            out = original(points, labels, *args, **kwargs)
+            after = out[0] if isinstance(out, tuple) else out
+            calls.append((np.array(points), np.array(labels), np.array(after)))
+            return out
+
+        self._module, self._original = module, original
+        module.relabel = observed
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._module is not None:
+            self._module.relabel = self._original
 
 
 def label_figure(run, sequence: str, path: Path, frames: list[int], *, forest=None) -> Path | None:
@@ -140,24 +140,20 @@ def label_figure(run, sequence: str, path: Path, frames: list[int], *, forest=No
     palette = np.vstack([[0, 0, 0], np.array(PART_COLOURS, dtype=np.uint8)]).astype(np.uint8)
     rows = [("ground truth", [palette[record.reference.labels[t]] for t in frames])]
     blank = np.zeros((*record.intrinsics.shape, 3), dtype=np.uint8)
-    if record.frames is not None and "cpd" in run.methods:
-        try:
-            snaps = relabel_snapshots(record.frames, frames, forest=forest)
-        except Exception:  # a figure must not sink an evaluation
-            snaps = {}
-        if snaps:
-            for k, title in ((1, "cpd: registered labels"), (2, "cpd: after relabelling")):
-                rows.append(
-                    (
-                        title,
-                        [
-                            _label_image(snaps[t][0], snaps[t][k], record.intrinsics)
-                            if t in snaps
-                            else blank
-                            for t in frames
-                        ],
-                    )
+    snaps = run.runs[("cpd", sequence)].relabel if "cpd" in run.methods else {}
+    if snaps:
+        for k, title in ((1, "cpd: registered labels"), (2, "cpd: after relabelling")):
+            rows.append(
+                (
+                    title,
+                    [
+                        _label_image(snaps[t][0], snaps[t][k], record.intrinsics)
+                        if t in snaps
+                        else blank
+                        for t in frames
+                    ],
                 )
+            )
     for method in run.methods:
         results = run.runs[(method, sequence)].results
         rows.append(

@@ -120,6 +120,8 @@ class MethodRun:
     label_hits: int = 0
     label_total: int = 0
     errors: list[str] = field(default_factory=list)
+    relabel: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
+    """For ``cpd`` with ``keep_frames``: per frame, (points, labels before, after relabelling)."""
 
     @property
     def joints(self) -> np.ndarray:
@@ -250,7 +252,14 @@ def run_methods(
                 bar.update(task, description=f"{seq.name}: {name}")
                 method = factory(intrinsics, forest=forest)
                 run = MethodRun(method=name, sequence=seq.name, results=[], seconds=0.0)
+                observer = None
+                if keep_frames and name == "cpd":
+                    from posedrift.evaluation._figures import observe_relabel
+
+                    observer = observe_relabel().__enter__()
                 for frame in seq.frames:
+                    if observer is not None:
+                        observer.calls.clear()
                     start = time.perf_counter()
                     try:
                         result = method.process(frame)
@@ -265,11 +274,15 @@ def run_methods(
                         run.errors.append(f"frame {frame.index}: {type(exc).__name__}: {exc}")
                     run.seconds += time.perf_counter() - start
                     run.results.append(result)
+                    if observer is not None and observer.calls:
+                        run.relabel[frame.index] = observer.calls[-1]
                     if labels is not None:
                         hits, counted = label_hits(result, labels[frame.index], intrinsics)
                         run.label_hits += hits
                         run.label_total += counted
                     bar.advance(task)
+                if observer is not None:
+                    observer.__exit__(None, None, None)
                 runs[(name, seq.name)] = run
             records.append(
                 SequenceRecord(

@@ -57,12 +57,15 @@ class CPDResult:
     _target_n: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     _source_n: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     _moved_n: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
-    _coef: np.ndarray | None = field(default=None, repr=False)  # nonrigid W (M, D)
+    _coef: np.ndarray | None = field(default=None, repr=False)  # exact nonrigid W (M, D)
     _sigma2_n: float = field(default=1.0, repr=False)
     _outlier_c: float = field(default=0.0, repr=False)
     _centre: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     _unit: float = field(default=1.0, repr=False)
     _kernel_width: float | None = field(default=None, repr=False)
+    # low-rank nonrigid: the displacement is G(p, landmarks) @ _landmark_coef
+    _landmarks: np.ndarray | None = field(default=None, repr=False)
+    _landmark_coef: np.ndarray | None = field(default=None, repr=False)
 
     def correspondence(self) -> tuple[np.ndarray, np.ndarray]:
         """For each target point, its most probable source point.
@@ -139,24 +142,24 @@ class CPDResult:
         moved : (K, D) float
             For nonrigid, ``p + G(p, source) W`` with the exact Gaussian kernel (the
             coherent displacement field's continuous extension); ``apply(source)``
-            reproduces ``moved`` (up to the low-rank approximation, if one was used).
+            reproduces ``moved``. After a low-rank registration the field is the
+            Nyström one, ``G(p, landmarks) A`` (the field the registration fitted), so
+            ``apply(source)`` reproduces ``moved`` there too.
         """
         d = self.moved.shape[1]
         pts = check_points(points, "points", dim=d, min_points=0, caller="apply")
         if self.kind in ("rigid", "affine"):
             return pts @ self.matrix.T + self.translation
+        from posedrift.registration._cpd import gaussian_kernel
+
         pn = (pts - self._centre) / self._unit
         out = pn.copy()
-        beta2 = self._kernel_width**2
-        ss = np.einsum("ij,ij->i", self._source_n, self._source_n)
-        step = max(1, (1 << 21) // max(1, self._source_n.shape[0]))
+        if self._landmarks is not None:
+            centres, coef = self._landmarks, self._landmark_coef
+        else:
+            centres, coef = self._source_n, self._coef
+        step = max(1, (1 << 21) // max(1, centres.shape[0]))
         for start in range(0, len(pn), step):
             blk = pn[start : start + step]
-            d2 = (
-                np.einsum("ij,ij->i", blk, blk)[:, None]
-                + ss[None, :]
-                - 2.0 * blk @ self._source_n.T
-            )
-            np.maximum(d2, 0.0, out=d2)
-            out[start : start + step] += np.exp(-d2 / (2.0 * beta2)) @ self._coef
+            out[start : start + step] += gaussian_kernel(blk, centres, self._kernel_width) @ coef
         return out * self._unit + self._centre

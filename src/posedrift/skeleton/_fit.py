@@ -351,6 +351,12 @@ def fit_skeleton(
         elif pred is not None and np.isfinite(pred[i]).all():
             joints[i] = pred[i]
             conf[i] = 0.3
+        else:  # Between the modes of the two parts that meet there.
+            pa, pb, _ = RING_JOINTS[name]
+            between = 0.5 * (modes[_P[pa]] + modes[_P[pb]])
+            if np.isfinite(between).all():
+                joints[i] = _push(between, RING_JOINTS[name][2])
+                conf[i] = 0.2
 
     modes_back = modes + PART_RADII[:, None] * (
         modes / np.maximum(np.linalg.norm(modes, axis=1, keepdims=True), 1e-9)

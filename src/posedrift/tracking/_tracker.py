@@ -113,8 +113,10 @@ class PoseTracker:
         CPD's relative tolerance on its objective.
     start_sigma : float
         Smallest starting sigma (metres) of a warm-started registration.
-    low_rank : int, optional
-        Rank of CPD's low-rank kernel (faster); None for the exact kernel.
+    low_rank : int or None
+        Rank of CPD's low-rank kernel (60 by default: 3-5 times faster than the
+        exact kernel at 400 points, with the same angle error on the development
+        clips); None for the exact kernel.
     alpha : float
         Steepness (1/m) of Algorithm 2's sigmoid.
     height : float, optional
@@ -152,10 +154,10 @@ class PoseTracker:
         kernel_width: float = 0.5,
         smoothness: float = 1.0,
         outlier_weight: float = 0.05,
-        max_iter: int = 40,
+        max_iter: int = 20,
         tol: float = 1e-4,
         start_sigma: float = 0.02,
-        low_rank: int | None = None,
+        low_rank: int | None = 60,
         alpha: float = 60.0,
         relabel_mode: str = "gate",
         evidence_floor: float = 0.05,
@@ -235,6 +237,7 @@ class PoseTracker:
         self._calibration: Calibration | None = None
         self._voxel: float | None = None
         self._seed_registration = None
+        self._part_share: np.ndarray | None = None
 
     @property
     def calibration(self) -> Calibration | None:
@@ -484,7 +487,15 @@ class PoseTracker:
             prediction=prediction,
             height=cal.height,
         )
-        health = assess(points, labels, fit.joints, fit.measured, height=cal.height, sigma=sigma)
+        health = assess(
+            points,
+            labels,
+            fit.joints,
+            fit.measured,
+            height=cal.height,
+            sigma=sigma,
+            part_counts=self._part_share,
+        )
         return _Attempt(labels=labels, fit=fit, health=health)
 
     # ------------------------------------------------------------------ initialization
@@ -500,12 +511,42 @@ class PoseTracker:
         return self.forest
 
     def _initialize(self, depth, intr, mask, full, pixels, points, graph) -> _Attempt | None:
-        """Label the frame with the forest, calibrate (first time) and fit a skeleton."""
+        """Label the frame afresh, calibrate (first time) and fit a skeleton.
+
+        The forest labels the frame; where its skeleton is not healthy, the geometric
+        labelling of an upright person is tried too and the better one is kept (a
+        labelling built from its own skeleton always looks consistent, so it is
+        only a fallback).
+        """
         forest = self._get_forest()
-        if isinstance(forest, str) and forest == "geometric":
+        sources = [forest]
+        if not (isinstance(forest, str) and forest == "geometric"):
+            sources.append("geometric")
+        saved = (self._calibration, self._part_share)
+        best = None
+        for source in sources:
+            self._calibration, self._part_share = saved
+            attempt = self._initialize_from(source, depth, intr, mask, full, pixels, points, graph)
+            if attempt is not None and (
+                best is None or attempt.health.score < best[0].health.score
+            ):
+                best = (attempt, self._calibration, self._part_share)
+            if best is not None and best[0].health.ok:
+                break
+        if best is None:
+            self._calibration, self._part_share = saved
+            return None
+        attempt, self._calibration, self._part_share = best
+        return attempt
+
+    def _initialize_from(
+        self, source, depth, intr, mask, full, pixels, points, graph
+    ) -> _Attempt | None:
+        """One initialization candidate from one label source."""
+        if isinstance(source, str) and source == "geometric":
             labels, _ = geometric_labels(points)
         else:
-            pred = forest.predict(depth, mask, intr)
+            pred = source.predict(depth, mask, intr)
             label_img = np.asarray(pred.labels)
             pix_labels = label_img[pixels[:, 0], pixels[:, 1]].astype(np.int64)
             if np.count_nonzero(pix_labels >= 0) < self.min_points:
@@ -532,6 +573,7 @@ class PoseTracker:
         cal = self._calibration
         anchors = bone_anchors(attempt.fit.joints, cal.bone_lengths)
         if fresh_calibration:
+            self._part_share = np.bincount(labels[labels >= 0], minlength=N_PARTS) / len(labels)
             reach = measure_reach(graph, points, labels, anchors, height=cal.height)
             self._calibration = cal = replace(cal, reach=reach)
         if self.relabel:  # Clean the forest's labels with Algorithm 2 and refit.
