@@ -423,3 +423,22 @@ def test_m_steps_solve_the_cpd_system():
     zn, land, proj, kept = _cpd.low_rank_factor(y, 5.0, 64)
     assert kept <= 0.8 * 64 and land.shape == (64, 3) and proj.shape == (64, kept)
     assert np.abs(zn @ zn.T - _cpd.gaussian_kernel(y, y, 5.0)).max() < 1e-4
+
+
+@pytest.mark.parametrize(
+    "options", [{"accelerate": True}, {"low_rank": "auto", "accelerate": True}]
+)
+def test_fast_paths_on_edge_cases(body, options):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        one = register_nonrigid([[0.0, 0.0, 0.0]], [[0.1, 0.2, 0.3]], **options)
+    np.testing.assert_allclose(one.moved, [[0.1, 0.2, 0.3]], atol=1e-3)
+    same = np.ones((20, 3))
+    np.testing.assert_allclose(register_nonrigid(same, same, **options).moved, same, atol=1e-9)
+    rng = np.random.default_rng(0)
+    src = np.repeat(rng.normal(size=(40, 3)), 3, axis=0)  # duplicated source points
+    assert np.all(np.isfinite(register_nonrigid(src, src[::3] + 0.01, **options).moved))
+    ident = register_nonrigid(body, body, **options)
+    np.testing.assert_allclose(ident.moved, body, atol=1e-6)
+    no_outliers = register_nonrigid(body, _smooth_warp(body), outlier_weight=0.0, **options)
+    assert _rms(no_outliers.moved, _smooth_warp(body)) < 1e-3

@@ -1,6 +1,6 @@
 """posedrift: 3-D human pose from depth frames on a CPU.
 
-The pipeline follows Kim et al.'s nonrigid point-set registration and body-part
+The pipeline follows the paper's nonrigid point-set registration and body-part
 tracking: depth silhouette -> 3-D points -> part labels tracked by Coherent Point
 Drift -> geodesic relabelling -> mean-shift joints -> skeleton -> joint angles.
 

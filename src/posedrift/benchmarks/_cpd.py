@@ -3,9 +3,9 @@
 ``run_cpd_benchmark(sizes, threads=..., repeats=..., rng=...)`` builds, per size, a
 humanoid-shaped source (:func:`posedrift.points.sample_humanoid`), a smooth warp of it,
 noise and 10% outliers, and times every implementation on the same arrays: median
-wall and CPU (``time.process_time``) time, iterations, RMS error of the moved source to the true warped positions, and
-peak memory (tracemalloc, which sees NumPy allocations). It also measures a realistic
-frame-to-frame pair cold and warm-started.
+wall and CPU (``time.process_time``) time, iterations, RMS error of the moved source to
+the true warped positions, and peak memory (tracemalloc, which sees NumPy
+allocations). It also measures a realistic frame-to-frame pair cold and warm-started.
 
 Peers are imported lazily; a missing one is reported as skipped.
 """

@@ -457,6 +457,93 @@ class BodyPartForest:
         np.put(labels, flat, _argmax_rows(probabilities))
         return PartPrediction(labels=labels, pixels=pixels, probabilities=probabilities)
 
+    def predict_pixels(
+        self,
+        depth: np.ndarray,
+        pixels: np.ndarray,
+        intrinsics: Intrinsics,
+        *,
+        mask: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Part probabilities of only the given pixels (cheap per-point appearance).
+
+        The probes read the same image as :meth:`predict` (background outside
+        ``mask`` and where depth is missing), so each row equals that pixel's row
+        of ``predict(depth, mask, intrinsics).probabilities``.
+
+        Parameters
+        ----------
+        depth : (H, W) float
+            Depth in metres.
+        pixels : (N, 2) int
+            ``(row, column)`` of the pixels to classify.
+        intrinsics : Intrinsics
+        mask : (H, W) bool, optional
+            The person's pixels; ``None`` takes every pixel with depth.
+
+        Returns
+        -------
+        (N, 15) float32
+            ``P(part | pixel)``; a uniform row for a pixel outside the foreground.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from posedrift.camera import camera_preset
+        >>> cam = camera_preset("kinect1-qvga")
+        >>> depth = np.zeros(cam.shape, np.float32); depth[100:140, 150:170] = 2.5
+        >>> forest = BodyPartForest.load_default()
+        >>> forest.predict_pixels(depth, np.array([[120, 160], [0, 0]]), cam).shape
+        (2, 15)
+        """
+        caller = "BodyPartForest.predict_pixels"
+        depth = np.asarray(depth)
+        if not isinstance(intrinsics, Intrinsics):
+            raise ValueError(
+                f"The 'intrinsics' argument of {caller} must be an Intrinsics. "
+                f"Got {type(intrinsics).__name__} instead."
+            )
+        if depth.ndim != 2 or depth.shape != intrinsics.shape:
+            raise ValueError(
+                f"The 'depth' argument of {caller} must be an image of shape "
+                f"{intrinsics.shape} (the intrinsics'). Got shape {depth.shape} instead."
+            )
+        pixels = np.asarray(pixels)
+        if pixels.ndim != 2 or pixels.shape[1] != 2 or not np.issubdtype(pixels.dtype, np.integer):
+            raise ValueError(
+                f"The 'pixels' argument of {caller} must be an (N, 2) integer array of "
+                f"(row, column). Got dtype {pixels.dtype}, shape {pixels.shape} instead."
+            )
+        height, width = depth.shape
+        if len(pixels) and (
+            pixels.min() < 0 or pixels[:, 0].max() >= height or pixels[:, 1].max() >= width
+        ):
+            raise ValueError(
+                f"The 'pixels' argument of {caller} must lie inside the {height} x {width} "
+                f"image. Got rows {pixels[:, 0].min()}..{pixels[:, 0].max()}, columns "
+                f"{pixels[:, 1].min()}..{pixels[:, 1].max()}."
+            )
+        depth = depth.astype(np.float32, copy=False)
+        with np.errstate(invalid="ignore"):
+            valid = np.isfinite(depth) & (depth > 0)
+        if mask is not None:
+            mask = np.asarray(mask)
+            if mask.shape != depth.shape:
+                raise ValueError(
+                    f"The 'mask' argument of {caller} must have the depth's shape "
+                    f"{depth.shape}. Got shape {mask.shape} instead."
+                )
+            valid &= mask.astype(bool, copy=False)
+        pixels = pixels.astype(np.intp, copy=False)
+        out = np.full((len(pixels), self.n_parts), 1.0 / self.n_parts, dtype=np.float32)
+        inside = valid[pixels[:, 0], pixels[:, 1]] if len(pixels) else np.zeros(0, bool)
+        if not inside.any():
+            return out
+        image = probe_image(depth, valid, self.background)
+        terms = pixel_terms(depth, pixels[inside], intrinsics, self.reference_focal)
+        out[inside] = self._average_leaves(self._descend_frame(image, depth.shape, terms))
+        return out
+
     def _descend_frame(
         self, image: np.ndarray, shape: tuple[int, int], terms: tuple[np.ndarray, ...]
     ) -> np.ndarray:
