@@ -301,3 +301,25 @@ def test_rewriting_a_folder_drops_stale_frames(sequence, tmp_path):
     assert sorted(p.name for p in (tmp_path / "depth").iterdir()) == ["000000.png", "000001.png"]
     assert sorted(p.name for p in (tmp_path / "labels").iterdir()) == ["000000.png", "000001.png"]
     assert len(read_synthetic(tmp_path).frames) == 2
+
+
+def test_in_place_keeps_a_walking_person_in_view_with_the_same_angles(body):
+    base = _arms_down_motion(n=30)
+    walk = np.linspace(0.0, 2.4, len(base))  # 2.4 m towards the camera
+    shifted = Motion(
+        base.joints + walk[:, None, None] * np.array([0.0, 0.0, 1.0]),
+        {k: v + walk[:, None] * np.array([0.0, 0.0, 1.0]) for k, v in base.extras.items()},
+        base.fps,
+        "walk",
+    )
+    kw = {"body": body, "calibration": False}
+    walking = build_sequence(shifted, **kw)
+    treadmill = build_sequence(shifted, in_place=True, **kw)
+    np.testing.assert_allclose(treadmill.reference.angles, walking.reference.angles, atol=1e-9)
+    pelvis = treadmill.reference.joints[:, [JOINT_INDEX["right_hip"], JOINT_INDEX["left_hip"]]]
+    depth_of_pelvis = pelvis.mean(axis=1)[:, 2]
+    assert np.ptp(depth_of_pelvis) < 1e-9  # stays at the protocol distance
+    walked = walking.reference.joints[:, JOINT_INDEX["torso"], 2]
+    own_step = base.joints[-1, JOINT_INDEX["torso"], 2] - base.joints[0, JOINT_INDEX["torso"], 2]
+    # without it, they walk up to the camera
+    assert walked[0] - walked[-1] == pytest.approx(2.4 + own_step, abs=1e-6)

@@ -69,6 +69,14 @@ def eval_synthetic(
     noise: Annotated[
         bool, typer.Option("--noise/--no-noise", help="Kinect-like depth noise.")
     ] = False,
+    in_place: Annotated[
+        bool,
+        typer.Option(
+            "--in-place/--world-motion",
+            help="Remove the person's walking travel so they stay about 2.8 m away in view "
+            "(the protocol's setting; angles unchanged), or keep the clip's own travel.",
+        ),
+    ] = True,
     json_out: Annotated[
         Path | None, typer.Option("--json", help="Write the results (JSON) here.")
     ] = None,
@@ -112,7 +120,9 @@ def eval_synthetic(
             motion = _load_motion(source)
             if progress_enabled():
                 typer.echo(f"rendering {label} ({frames} frames)", err=True)
-            seq = build_sequence(motion, n_frames=frames, noise=noise, rng=seed + i, name=label)
+            seq = build_sequence(
+                motion, n_frames=frames, noise=noise, in_place=in_place, rng=seed + i, name=label
+            )
         except (ValueError, OSError, KeyError) as exc:
             typer.echo(f"error: {source}: {exc}", err=True)
             skipped.append({"sequence": source, "reason": str(exc)})
@@ -132,6 +142,7 @@ def eval_synthetic(
     except ValueError as exc:
         raise fail(str(exc)) from exc
     report["noise"] = bool(noise)
+    report["in_place"] = bool(in_place)
     _finish(report, skipped, json_out, paper)
 
 

@@ -56,6 +56,13 @@ def synth(
     noise: Annotated[
         bool, typer.Option("--noise/--no-noise", help="Kinect v1-like depth noise.")
     ] = False,
+    in_place: Annotated[
+        bool,
+        typer.Option(
+            "--in-place/--world-motion",
+            help="Remove the walking travel so the person stays in view (angles unchanged).",
+        ),
+    ] = False,
     background: Annotated[
         bool, typer.Option("--background/--no-background", help="Render a floor and back wall.")
     ] = False,
@@ -117,6 +124,7 @@ def synth(
                 background=background,
                 shape=shape,
                 stature=height,
+                in_place=in_place,
                 rng=seed,
                 on_frame=on_frame,
             )

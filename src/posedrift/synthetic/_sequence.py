@@ -85,6 +85,7 @@ def build_sequence(
     shape: Mapping[str, Any] | None = None,
     stature: float | None = None,
     calibration: bool = True,
+    in_place: bool = False,
     rng: int | np.random.Generator | None = None,
     name: str | None = None,
     on_frame: Callable[[int, int], None] | None = None,
@@ -134,6 +135,10 @@ def build_sequence(
         in metres. None keeps the clip's own size.
     calibration : bool
         Apply :func:`with_calibration_pose` (default). False keeps the clip as is.
+    in_place : bool
+        Remove the pelvis's horizontal travel (a treadmill view): turns, jumps and
+        squats stay, but a walking person stays at ``distance`` in view, as the
+        protocol's person facing the camera at about 2.8 m. Angles do not change.
     rng : int, numpy.random.Generator or None
         Seed or generator for the noise.
     name : str, optional
@@ -186,6 +191,8 @@ def build_sequence(
     if stature is not None:
         stature = check_scalar(stature, "stature", low=0.5, high=2.5, caller=where)
         clip = _scaled(clip, body, stature)
+    if in_place:
+        clip = _in_place(clip)
     total = len(clip)
     if n_frames is not None and n_frames > total:
         logger.info("clip %s has %d frames at %g fps; %d asked", clip.name, total, fps, n_frames)
@@ -236,6 +243,27 @@ def build_sequence(
         kind="synthetic",
     )
     return EvaluationSequence(name=seq_name, frames=tuple(frames), reference=reference, fps=fps)
+
+
+def _in_place(clip: Motion) -> Motion:
+    """The clip with the pelvis's horizontal travel since frame 0 removed from every point."""
+    from posedrift.synthetic._motion import Motion
+
+    centres = pelvis_centre(np.asarray(clip.joints, dtype=float))
+    travel = centres - centres[:1]
+    travel[:, 1] = 0.0  # keep vertical motion: jumps, squats, climbing
+
+    def shift(points: np.ndarray) -> np.ndarray:
+        points = np.asarray(points, dtype=float)
+        return points - (travel[:, None, :] if points.ndim == 3 else travel)
+
+    return Motion(
+        shift(clip.joints),
+        {key: shift(value) for key, value in (clip.extras or {}).items()},
+        clip.fps,
+        clip.name,
+        {**dict(getattr(clip, "meta", {}) or {}), "in_place": True},
+    )
 
 
 def _scaled(clip: Motion, body: BodyModel, stature: float) -> Motion:

@@ -2,10 +2,13 @@
 
 Per frame: segment the person; back-project (Eq. 1); downsample to about 400
 points; register the previous frame's labelled points onto them (nonrigid CPD,
-Algorithm 1, warm-started); carry the labels over through the posterior; relabel
-by geodesic reach from the part joints (Algorithm 2); mean-shift part modes; fit the
-skeleton with the calibrated bone lengths; judge the track's health, and
-re-initialize from the body-part forest when it is lost.
+Algorithm 1, warm-started); carry the labels over through the posterior; fuse in
+the body-part forest's probabilities at the points' pixels (a product of experts,
+beyond the paper: it stops the labels drifting; ``appearance_weight=0`` is the
+paper's pure tracking); relabel by geodesic reach from the part joints
+(Algorithm 2); mean-shift part modes; fit the skeleton with the calibrated bone
+lengths; judge the track's health, and re-initialize from the body-part forest
+when it is lost.
 """
 
 from __future__ import annotations
@@ -37,6 +40,10 @@ from posedrift.tracking._result import FrameResult, FrameStatus
 
 N_PARTS = 15
 _TRACK_FLOOR = 0.02  # floor of the tracked posterior in the fusion with appearance
+_RING_OFFSETS = sorted(
+    ((dr, dc) for dr in range(-3, 4) for dc in range(-3, 4) if (dr, dc) != (0, 0)),
+    key=lambda o: o[0] ** 2 + o[1] ** 2,
+)  # pixel offsets, nearest first
 
 
 @dataclass
@@ -177,8 +184,8 @@ class PoseTracker:
         background: BackgroundModel | None = None,
         segment_options: dict | None = None,
         min_points: int = 60,
-        appearance_weight: float = 1.0,
-        appearance_floor: float = 0.05,
+        appearance_weight: float = 3.0,
+        appearance_floor: float = 0.01,
         rng: int | np.random.Generator | None = 0,
     ) -> None:
         caller = "PoseTracker"
@@ -344,7 +351,9 @@ class PoseTracker:
         attempt = None
         message = ""
         if self._state is not None and self._calibration is not None:
-            appearance = self._appearance(depth, intr, mask, points, full, pixels)
+            t_app = time.perf_counter()
+            appearance = self._appearance(depth, intr, mask, points)
+            timings["appearance"] = 1e3 * (time.perf_counter() - t_app)
             attempt = self._track(points, graph, timings, appearance)
             if not attempt.health.ok:
                 message = f"{where}: track lost ({attempt.health.reason}); re-initialized"
@@ -452,7 +461,7 @@ class PoseTracker:
                 self._seed_registration = register_nonrigid(source[:20], source[:20], max_iter=1)
         return self._seed_registration
 
-    def _appearance(self, depth, intr, mask, points, full, pixels) -> np.ndarray | None:
+    def _appearance(self, depth, intr, mask, points) -> np.ndarray | None:
         """The forest's ``(N, 15)`` part probabilities at each point's pixel, or None."""
         if self.appearance_weight <= 0:
             return None
@@ -460,16 +469,21 @@ class PoseTracker:
         if not hasattr(forest, "predict_pixels"):
             return None
         # A point is a voxel centroid: take the pixel it projects to where that pixel
-        # is the person's, else the pixel of the nearest back-projected point.
+        # is the person's, else the nearest of the person's pixels within 3 pixels
+        # (none: a uniform row, no appearance evidence).
+        height, width = depth.shape
         uv = np.rint(project(points, intr)).astype(np.intp)
-        rows = np.clip(uv[:, 1], 0, depth.shape[0] - 1)
-        cols = np.clip(uv[:, 0], 0, depth.shape[1] - 1)
-        off = ~mask[rows, cols]
-        if off.any():
-            from scipy.spatial import cKDTree
-
-            _, nn = cKDTree(full).query(points[off])
-            rows[off], cols[off] = pixels[nn, 0], pixels[nn, 1]
+        rows = np.clip(uv[:, 1], 0, height - 1)
+        cols = np.clip(uv[:, 0], 0, width - 1)
+        off = np.flatnonzero(~mask[rows, cols])
+        for dr, dc in _RING_OFFSETS:
+            if len(off) == 0:
+                break
+            r = np.clip(rows[off] + dr, 0, height - 1)
+            c = np.clip(cols[off] + dc, 0, width - 1)
+            hit = mask[r, c]
+            rows[off[hit]], cols[off[hit]] = r[hit], c[hit]
+            off = off[~hit]
         return forest.predict_pixels(depth, np.column_stack([rows, cols]), intr, mask=mask)
 
     def _fuse(self, post: np.ndarray, appearance: np.ndarray | None) -> np.ndarray:
@@ -478,7 +492,8 @@ class PoseTracker:
             return post
         total = post.sum(axis=1, keepdims=True)
         norm = np.where(total > 1e-12, post / np.where(total > 1e-12, total, 1.0), 1.0 / N_PARTS)
-        fused = (norm + _TRACK_FLOOR) * (appearance + self.appearance_floor) ** self.appearance_weight
+        expert = (appearance + self.appearance_floor) ** self.appearance_weight
+        fused = (norm + _TRACK_FLOOR) * expert
         return fused / fused.sum(axis=1, keepdims=True)
 
     def _track(
