@@ -161,7 +161,15 @@ def test_eval_synthetic_cli_schema_and_skip(mocap_dir, tmp_path, monkeypatch):
     )
     assert result.exit_code == 1, result.output
     data = json.loads(out.read_text())
-    assert set(data) == {"protocol", "frames", "sequences", "methods", "noise", "skipped"}
+    assert set(data) == {
+        "protocol",
+        "frames",
+        "sequences",
+        "methods",
+        "noise",
+        "in_place",
+        "skipped",
+    }
     assert data["protocol"] == "synthetic" and data["frames"] == 12
     assert data["sequences"] == ["001_01"]
     assert list(data["methods"]) == ["shotton", "pda"]
