@@ -180,7 +180,7 @@ def test_eval_synthetic_cli_schema_and_skip(mocap_dir, tmp_path, monkeypatch):
         assert row["angle_error_deg"]["mean"] < 12.0
     assert data["skipped"][0]["sequence"] == str(bad) and data["skipped"][0]["reason"]
     assert "| shotton |" in result.stdout and "| pda |" in result.stdout
-    assert "paper: Kim et al." in result.stdout
+    assert "paper: its proposed method (CPD)" in result.stdout
 
 
 def test_eval_utd_cli_subset_and_unknown(utd_dir, tmp_path, monkeypatch):

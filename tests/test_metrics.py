@@ -101,5 +101,5 @@ def test_markdown_table_layout():
     lines = text.splitlines()
     assert lines[0].startswith("| Method | L elbow | R elbow | L shoulder | R shoulder | L knee")
     assert "| cpd | 2.00 |" in lines[2] and "| 61.2 | 0.800 | 12.0 | 3 |" in lines[2]
-    assert any("paper: Kim et al. (CPD)" in line and "*6.26*" in line for line in lines)
+    assert any("paper: its proposed method (CPD)" in line and "*6.26*" in line for line in lines)
     assert "not comparable" in text

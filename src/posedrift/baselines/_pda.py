@@ -1,6 +1,6 @@
 """Dinh et al. 2014, per frame: principal direction analysis of the labelled parts.
 
-Dinh, Kim, Lee and Kim, "Principal direction analysis-based real-time 3D human
+Dinh et al., "Principal direction analysis-based real-time 3D human
 pose reconstruction from a single depth image", SoICT 2013 / Journal 2014,
 doi:10.1145/2542050.2542071.
 

@@ -9,7 +9,7 @@ from posedrift.skeleton import ANGLE_NAMES
 PAPER_TABLE1: dict[str, tuple[float, ...]] = {
     "Shotton et al. [9]": (9.24, 9.41, 9.12, 9.81, 9.91, 10.15, 10.34, 9.67, 9.70),
     "Dinh et al. [15] (PDA)": (5.69, 5.63, 6.47, 6.88, 8.22, 8.73, 8.37, 6.84, 7.10),
-    "Kim et al. (CPD)": (5.54, 5.72, 5.32, 5.64, 8.02, 8.27, 6.40, 5.21, 6.26),
+    "its proposed method (CPD)": (5.54, 5.72, 5.32, 5.64, 8.02, 8.27, 6.40, 5.21, 6.26),
 }
 """The paper's Table 1 (degrees; ``ANGLE_NAMES`` order, then the mean), on its own data."""
 
