@@ -447,6 +447,7 @@ class PoseTracker:
                     max_iter=self.max_iter,
                     warm_start=prev,
                     low_rank=self.low_rank,
+                    accelerate=True,
                 )
         post = res.transfer_labels(labels.astype(np.int64), N_PARTS)
         return post, res.apply, res, float(np.sqrt(max(res.sigma2, 0.0)))

@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# Reproduce the tables of docs/RESULTS.md (about 15-20 minutes on 2 cores).
+# Usage: bash benchmarks/results.sh [OUT_DIR]   (needs ../shared/data or $POSEDRIFT_DATA)
+set -euo pipefail
+here="$(cd "$(dirname "$0")/.." && pwd)"
+data="${POSEDRIFT_DATA:-$here/../shared/data}"
+out="${1:-results}"
+mkdir -p "$out"
+M="$data/mocap"
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1
+methods=cpd,shotton,pda,icp
+
+# Table 1 on development clips the default forest was trained on, and on held-out clips.
+posedrift -q eval synthetic builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" "$M/cmu/002_10.bvh" \
+    "$M/cmu/001_08.bvh" --frames 500 --methods "$methods" --json "$out/table1_dev.json" \
+    --figures "$out/figures_dev" | tee "$out/table1_dev.md"
+posedrift -q eval synthetic "$M/cmu-original-skeleton/131_03.bvh" "$M/cmu/007_03.bvh" \
+    "$M/cmu/007_05.bvh" "$M/cmu/007_08.bvh" --frames 500 --methods "$methods" \
+    --json "$out/table1_heldout.json" | tee "$out/table1_heldout.md"
+# With Kinect-like depth noise.
+posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 --noise --methods "$methods" \
+    --json "$out/table1_noise.json" | tee "$out/table1_noise.md"
+# Ablations of the tracker.
+posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 \
+    --methods cpd,cpd-norelabel,cpd-rigid,cpd-cold,cpd-200,cpd-800 \
+    --json "$out/ablations.json" --no-paper | tee "$out/ablations.md"
+# Real Kinect recordings: one sequence per action, subject (a mod 4) + 1, trial 1.
+seqs=$(for a in $(seq 1 27); do printf "a%d_s%d_t1," "$a" $(( a % 4 + 1 )); done)
+posedrift -q eval utd "$data/utd-mhad" --sequences "${seqs%,}" --methods "$methods" \
+    --json "$out/utd.json" | tee "$out/utd.md"
