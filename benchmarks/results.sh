@@ -22,8 +22,14 @@ posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 --noise --m
     --json "$out/table1_noise.json" | tee "$out/table1_noise.md"
 # Ablations of the tracker.
 posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 \
-    --methods cpd,cpd-norelabel,cpd-rigid,cpd-cold,cpd-200,cpd-800 \
+    --methods cpd,cpd-paper,cpd-norelabel,cpd-rigid,cpd-cold,cpd-200,cpd-800 \
     --json "$out/ablations.json" --no-paper | tee "$out/ablations.md"
+# Drift (first / last 100 frames per sequence in the JSON), and the time of a full
+# 500-frame, four-method run.
+start=$(date +%s)
+posedrift -q eval synthetic builtin --frames 500 --methods "$methods,cpd-paper" \
+    --json "$out/drift.json" | tee "$out/drift.md"
+echo "500 frames, $methods,cpd-paper: $(( $(date +%s) - start )) s wall" | tee "$out/drift_time.txt"
 # Real Kinect recordings: one sequence per action, subject (a mod 4) + 1, trial 1.
 seqs=$(for a in $(seq 1 27); do printf "a%d_s%d_t1," "$a" $(( a % 4 + 1 )); done)
 posedrift -q eval utd "$data/utd-mhad" --sequences "${seqs%,}" --methods "$methods" \

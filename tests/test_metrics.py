@@ -103,3 +103,14 @@ def test_markdown_table_layout():
     assert "| cpd | 2.00 |" in lines[2] and "| 61.2 | 0.800 | 12.0 | 3 |" in lines[2]
     assert any("paper: its proposed method (CPD)" in line and "*6.26*" in line for line in lines)
     assert "not comparable" in text
+
+
+def test_drift_compares_the_first_and_last_hundred_frames():
+    from posedrift.evaluation._harness import _drift
+
+    ref = np.full((250, 8), 90.0)
+    est = ref.copy()
+    est[:100] += 1.0
+    est[150:] -= 3.0
+    assert _drift(est, ref) == {"first_100_deg": 1.0, "last_100_deg": 3.0}
+    assert _drift(est[:199], ref[:199]) == {}

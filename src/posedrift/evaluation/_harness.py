@@ -64,6 +64,10 @@ METHODS: dict[str, tuple[str, MethodFactory]] = {
         "the tracking loop with nearest-neighbour (ICP) correspondences",
         _baseline("ICPTracker"),
     ),
+    "cpd-paper": (
+        "ablation: the paper's pure tracking, no per-frame forest evidence",
+        _tracker(appearance_weight=0.0),
+    ),
     "cpd-norelabel": ("ablation: no geodesic relabelling", _tracker(relabel=False)),
     "cpd-rigid": ("ablation: rigid instead of nonrigid CPD", _tracker(registration="rigid")),
     "cpd-cold": ("ablation: no warm start of CPD", _tracker(warm_start=False)),
@@ -322,6 +326,22 @@ def _round(value: float | None, digits: int = 4) -> float | None:
     return None if value is None else round(float(value), digits)
 
 
+DRIFT_WINDOW = 100
+"""Frames at each end of a sequence compared for drift."""
+
+
+def _drift(angles: np.ndarray, reference: np.ndarray) -> dict[str, float | None]:
+    """Mean angle error over the first and the last ``DRIFT_WINDOW`` frames.
+
+    Only for sequences of at least two windows; empty otherwise.
+    """
+    if len(reference) < 2 * DRIFT_WINDOW:
+        return {}
+    first = angle_errors(angles[:DRIFT_WINDOW], reference[:DRIFT_WINDOW])["mean"]
+    last = angle_errors(angles[-DRIFT_WINDOW:], reference[-DRIFT_WINDOW:])["mean"]
+    return {"first_100_deg": _round(first), "last_100_deg": _round(last)}
+
+
 def summarize(run: EvaluationRun) -> dict:
     """The JSON of ``posedrift eval`` (``METHOD.md`` section 6) from a run.
 
@@ -330,7 +350,8 @@ def summarize(run: EvaluationRun) -> dict:
     section 6: per method ``"filled"`` (the same errors with each failed frame
     filled by the last known pose), ``"per_sequence"``, ``"method_errors"``
     (exceptions a method raised, counted as failed frames) and ``"status_counts"``
-    (frames per :class:`~posedrift.tracking.FrameStatus`).
+    (frames per :class:`~posedrift.tracking.FrameStatus`); per sequence of at least
+    200 frames, ``"first_100_deg"`` and ``"last_100_deg"`` (drift).
     """
     out: dict[str, Any] = {
         "protocol": run.protocol,
@@ -369,6 +390,7 @@ def summarize(run: EvaluationRun) -> dict:
                     ),
                     "mpjpe_mm": _round(mpjpe_mm(r.joints, s.reference.joints), 2),
                     "failed_frames": int(np.count_nonzero(failed_frames(r.joints))),
+                    **_drift(r.angles, s.reference.angles),
                 }
                 for s, r in zip(run.sequences, per, strict=True)
             },
