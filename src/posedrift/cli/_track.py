@@ -11,47 +11,30 @@ import numpy as np
 import typer
 
 from posedrift.cli._app import app, fail, progress_enabled
+from posedrift.cli._options import (
+    CameraOption,
+    DepthInput,
+    DepthScaleOption,
+    FpsOption,
+    IntrinsicsOption,
+    UnmirrorOption,
+)
 
 EXIT_UNREADABLE_FRAMES = 1
 
 
 @app.command("track")
 def track(
-    source: Annotated[
-        Path,
-        typer.Argument(
-            help="Depth input: a folder of 16-bit PNGs, .npy/.npz stack, UTD-MHAD .mat, "
-            "RealSense .bag/.db3."
-        ),
-    ],
+    source: DepthInput,
     out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")],
-    camera: Annotated[
-        str | None,
-        typer.Option("--camera", help="Camera preset: kinect1-vga, kinect1-qvga, kinect2, d435."),
-    ] = None,
-    intrinsics: Annotated[
-        str | None, typer.Option("--intrinsics", help="fx,fy,cx,cy in pixels.")
-    ] = None,
-    depth_scale: Annotated[
-        str | None,
-        typer.Option(
-            "--depth-scale",
-            help="Depth units per metre: 1000 (mm, default), 5000 (TUM), or mm / tum / m.",
-        ),
-    ] = None,
-    fps: Annotated[
-        float, typer.Option("--fps", min=0.001, help="Frame rate where the input has none.")
-    ] = 30.0,
+    camera: CameraOption = None,
+    intrinsics: IntrinsicsOption = None,
+    depth_scale: DepthScaleOption = None,
+    fps: FpsOption = 30.0,
     n_points: Annotated[
         int, typer.Option("--points", min=20, help="Points per frame after downsampling.")
     ] = 400,
-    unmirror: Annotated[
-        bool | None,
-        typer.Option(
-            "--unmirror/--no-unmirror",
-            help="Flip mirrored recordings left-right (default: only UTD-MHAD .mat files).",
-        ),
-    ] = None,
+    unmirror: UnmirrorOption = None,
     video: Annotated[bool, typer.Option("--video/--no-video", help="Write tracking.gif.")] = True,
     viewer: Annotated[
         bool, typer.Option("--viewer/--no-viewer", help="Write the HTML 3-D viewer.")

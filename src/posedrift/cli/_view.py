@@ -8,6 +8,14 @@ from typing import Annotated
 import typer
 
 from posedrift.cli._app import app, fail, progress_enabled
+from posedrift.cli._options import (
+    CameraOption,
+    DepthInput,
+    DepthScaleOption,
+    FpsOption,
+    IntrinsicsOption,
+    UnmirrorOption,
+)
 
 EXIT_OK = 0
 EXIT_UNREADABLE_FRAMES = 1
@@ -16,40 +24,16 @@ EXIT_BAD_INPUT = 2
 
 @app.command("view")
 def view(
-    source: Annotated[
-        Path,
-        typer.Argument(
-            help="Depth input: a folder of 16-bit PNGs, .npy/.npz, UTD-MHAD .mat, .bag/.db3."
-        ),
-    ],
+    source: DepthInput,
     out: Annotated[
         Path | None,
         typer.Option("--out", "-o", help="Write a depth preview animation here (.gif or .mp4)."),
     ] = None,
-    camera: Annotated[
-        str | None,
-        typer.Option("--camera", help="Camera preset (kinect1-qvga, kinect1-vga, kinect2, d435)."),
-    ] = None,
-    intrinsics: Annotated[
-        str | None, typer.Option("--intrinsics", help="fx,fy,cx,cy in pixels.")
-    ] = None,
-    depth_scale: Annotated[
-        str | None,
-        typer.Option(
-            "--depth-scale",
-            help="Depth units per metre: 1000 (mm, default), 5000 (TUM), or mm / tum / m.",
-        ),
-    ] = None,
-    fps: Annotated[
-        float, typer.Option("--fps", min=0.001, help="Frame rate where the input has none.")
-    ] = 30.0,
-    unmirror: Annotated[
-        bool | None,
-        typer.Option(
-            "--unmirror/--no-unmirror",
-            help="Flip mirrored recordings left-right (default: only UTD-MHAD .mat files).",
-        ),
-    ] = None,
+    camera: CameraOption = None,
+    intrinsics: IntrinsicsOption = None,
+    depth_scale: DepthScaleOption = None,
+    fps: FpsOption = 30.0,
+    unmirror: UnmirrorOption = None,
     strict: Annotated[
         bool,
         typer.Option("--strict", help="Exit with status 1 when any frame is unreadable."),
