@@ -15,6 +15,11 @@ MAX_VIDEO_FRAMES = 300
 """Longer sequences are strided so the animation stays a few megabytes."""
 
 
+def video_stride(n_frames: int) -> int:
+    """Every how many frames one goes into the animation."""
+    return max(1, -(-n_frames // MAX_VIDEO_FRAMES))
+
+
 def write_outputs(
     results: Sequence[FrameResult],
     frames: Sequence[DepthFrame | object | None],
@@ -27,17 +32,19 @@ def write_outputs(
     viewer: bool = True,
     plots: bool = True,
     body: bool = True,
+    stride: int | None = None,
 ) -> dict[str, Path]:
     """Write poses (JSON, CSV, BVH), the animation, the viewer and the angle plot.
 
     The poses are written first, so a failure in a picture loses no result; a
-    picture that cannot be made is logged and skipped.
+    picture that cannot be made is logged and skipped. The animation shows every
+    ``stride``-th frame (default :func:`video_stride` of the sequence's length).
     """
     from posedrift.io import write_poses
 
     out.mkdir(parents=True, exist_ok=True)
     written = dict(write_poses(results, out, intrinsics=intrinsics, fps=fps))
-    stride = max(1, -(-len(results) // MAX_VIDEO_FRAMES))
+    stride = stride or video_stride(len(results))
     jobs = []
     if plots:
         jobs.append(("angles", lambda: _plot(results, out / "angles.png", reference, fps)))

@@ -54,7 +54,7 @@ def track(
     """
     from rich.progress import Progress
 
-    from posedrift.cli._outputs import write_outputs
+    from posedrift.cli._outputs import video_stride, write_outputs
     from posedrift.io import UnreadableFrame, open_depth_source
     from posedrift.tracking import FrameResult, FrameStatus, PoseTracker
 
@@ -77,6 +77,7 @@ def track(
     unreadable = 0
     seconds = 0.0
     written: dict = {}
+    stride = video_stride(len(reader))  # only the frames the animation shows are kept
     try:
         with Progress(disable=not progress_enabled(), transient=True) as bar:
             task = bar.add_task(f"tracking {source.name}", total=len(reader))
@@ -90,7 +91,8 @@ def track(
                     start = time.perf_counter()
                     results.append(tracker.process(item))
                     seconds += time.perf_counter() - start
-                    frames.append(item if video else None)
+                    keep = video and len(frames) % stride == 0
+                    frames.append(item if keep else None)
                 bar.advance(task)
     finally:  # whatever was processed is written, even after an interruption
         if results:
@@ -102,6 +104,7 @@ def track(
                 fps=reader.fps,
                 video=video,
                 viewer=viewer,
+                stride=stride,
             )
             if point_clouds:
                 from posedrift.io import write_point_clouds
