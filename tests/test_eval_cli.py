@@ -92,8 +92,9 @@ def test_harness_metrics_failures_and_label_accuracy():
         progress=False,
         forest=object(),
     )
-    assert set(report) == {"protocol", "frames", "sequences", "methods"}
+    assert set(report) == {"protocol", "convention", "frames", "sequences", "methods"}
     assert report["protocol"] == "synthetic" and report["frames"] == 6
+    assert report["convention"] == "native"
     row = report["methods"]["offset"]
     assert METHOD_KEYS <= set(row)
     assert row["failed_frames"] == 4  # frames 1, 3, 5 lost; frame 4 raised
@@ -105,6 +106,9 @@ def test_harness_metrics_failures_and_label_accuracy():
     assert row["filled"]["mpjpe_mm"] == pytest.approx(50.0)
     assert row["frames_per_second"] > 0
     assert report["methods"]["centroid"]["failed_frames"] == 0
+    # The toy person faces the camera in every frame.
+    assert row["by_view"]["front"] == {"frames": 6, "angle_error_mean_deg": 0.0}
+    assert row["by_view"]["back"] == {"frames": 0, "angle_error_mean_deg": None}
 
 
 def test_parse_methods():
@@ -163,6 +167,7 @@ def test_eval_synthetic_cli_schema_and_skip(mocap_dir, tmp_path, monkeypatch):
     data = json.loads(out.read_text())
     assert set(data) == {
         "protocol",
+        "convention",
         "frames",
         "sequences",
         "methods",
@@ -202,6 +207,16 @@ def test_eval_utd_cli_subset_and_unknown(utd_dir, tmp_path, monkeypatch):
         {"sequence": "a99_s9_t9", "reason": "no such sequence in the folder"}
     ]
     assert "a99_s9_t9" in result.stderr
+    # Scored in the Kinect convention by default; the unconverted errors are kept.
+    assert data["convention"] == "kinect"
+    assert 0 < row["native"]["mpjpe_mm"] < 400 and row["native"]["mpjpe_mm"] != row["mpjpe_mm"]
+    assert "kinect convention" in result.stdout
+
+
+def test_eval_utd_rejects_unknown_convention(utd_dir):
+    result = CliRunner().invoke(app, ["eval", "utd", str(utd_dir), "--convention", "vicon"])
+    assert result.exit_code != 0
+    assert "Unknown --convention 'vicon'" in result.stderr and "kinect" in result.stderr
 
 
 def test_eval_rejects_unknown_methods(tmp_path):

@@ -77,3 +77,19 @@ def test_batched_and_nan_handling():
 def test_wrong_shape_names_the_argument():
     with pytest.raises(ValueError, match="'joints'.*\\(\\.\\.\\., 15, 3\\)"):
         joint_angles(np.zeros((14, 3)))
+
+
+def test_facing_yaw_follows_a_turn_about_the_vertical():
+    from posedrift.skeleton import facing_yaw
+
+    world = t_pose_joints(1.75)  # +Y up, facing +Z, the person's left at +X
+    frames = []
+    for yaw in (0.0, 30.0, 90.0, 150.0, 180.0, -60.0):
+        a = np.radians(yaw)
+        turn = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+        # Camera 3 m in front of the person, looking back at them (OpenCV axes).
+        frames.append((world @ turn.T) * [1.0, -1.0, -1.0] + [0.0, 0.0, 3.0])
+    got = facing_yaw(np.stack(frames))
+    np.testing.assert_allclose(got, [0.0, 30.0, 90.0, 150.0, 180.0, 60.0], atol=1e-9)
+    unknown = np.full((15, 3), np.nan)
+    assert np.isnan(facing_yaw(unknown))

@@ -185,11 +185,23 @@ def eval_utd(
             "--model", help="Body-part forest file shared by all methods (default: shipped)."
         ),
     ] = None,
+    convention: Annotated[
+        str,
+        typer.Option(
+            "--convention",
+            help="Score joints moved to this skeleton convention: kinect (the reference's) "
+            "or native (as recovered).",
+        ),
+    ] = "kinect",
 ) -> None:
     """Evaluate every method on UTD-MHAD against the Kinect SDK skeleton.
 
     The Kinect skeleton is itself an estimate: errors are against a reference, not
-    ground truth. Images are un-mirrored before the methods see them. A sequence
+    ground truth. Kinect places joints differently (higher hips, lower shoulders...):
+    by default every method's joints are moved to the Kinect convention by fixed
+    offsets fitted once on development recordings (posedrift.skeleton.to_convention);
+    the JSON keeps the unconverted errors under "native". Images are un-mirrored
+    before the methods see them. A sequence
     whose skeleton file is missing, unreadable or shorter than its depth is named,
     skipped, and makes the exit status 1.
 
@@ -201,7 +213,12 @@ def eval_utd(
         load_utd_sequence,
         parse_methods,
     )
+    from posedrift.skeleton import CONVENTIONS
 
+    if convention not in CONVENTIONS:
+        raise fail(
+            f"Unknown --convention {convention!r}: expected one of {', '.join(CONVENTIONS)}."
+        )
     try:
         names = parse_methods(methods)
         found, missing = find_utd_sequences(root)
@@ -242,6 +259,7 @@ def eval_utd(
             progress=progress_enabled(),
             figures_dir=figures,
             protocol="utd",
+            convention=convention,
         )
     except ValueError as exc:
         if "No sequence" in str(exc):

@@ -26,7 +26,7 @@ from posedrift.evaluation._metrics import (
     mpjpe_mm,
 )
 from posedrift.evaluation._types import EvaluationSequence, Reference
-from posedrift.skeleton import joint_angles
+from posedrift.skeleton import CONVENTIONS, facing_yaw, joint_angles, to_convention
 from posedrift.tracking import FrameResult, FrameStatus, PoseMethod
 
 logger = logging.getLogger(__name__)
@@ -342,29 +342,60 @@ def _drift(angles: np.ndarray, reference: np.ndarray) -> dict[str, float | None]
     return {"first_100_deg": _round(first), "last_100_deg": _round(last)}
 
 
-def summarize(run: EvaluationRun) -> dict:
+VIEWS: dict[str, tuple[float, float]] = {
+    "front": (0.0, 60.0),
+    "side": (60.0, 120.0),
+    "back": (120.0, 180.01),
+}
+"""Bins of the reference's :func:`~posedrift.skeleton.facing_yaw` (degrees) for the
+per-view errors: facing the camera, side on, back to the camera."""
+
+
+def _by_view(angles: np.ndarray, ref_angles: np.ndarray, yaw: np.ndarray) -> dict:
+    """Mean angle error and frame count per view (``VIEWS``)."""
+    out = {}
+    for view, (low, high) in VIEWS.items():
+        sel = (yaw >= low) & (yaw < high)
+        mean = angle_errors(angles[sel], ref_angles[sel])["mean"] if sel.any() else None
+        out[view] = {"frames": int(sel.sum()), "angle_error_mean_deg": _round(mean)}
+    return out
+
+
+def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
     """The JSON of ``posedrift eval`` (``METHOD.md`` section 6) from a run.
+
+    With ``convention`` other than ``"native"``, every method's joints are first
+    moved to that skeleton convention (:func:`posedrift.skeleton.to_convention`, e.g.
+    ``"kinect"`` against a Kinect SDK reference); the report then says so in
+    ``"convention"``, and each method's ``"native"`` block keeps the errors of the
+    unconverted joints.
 
     Errors are computed over all frames of all sequences together; failed frames
     (no pose) are counted and left out of the error means. Extra fields beyond
     section 6: per method ``"filled"`` (the same errors with each failed frame
     filled by the last known pose), ``"per_sequence"``, ``"method_errors"``
     (exceptions a method raised, counted as failed frames) and ``"status_counts"``
-    (frames per :class:`~posedrift.tracking.FrameStatus`); per sequence of at least
-    200 frames, ``"first_100_deg"`` and ``"last_100_deg"`` (drift).
+    (frames per :class:`~posedrift.tracking.FrameStatus`), ``"by_view"`` (the mean
+    angle error over the frames where the reference faces the camera, is side on,
+    or has its back to it: :data:`VIEWS`); per sequence of at least 200 frames,
+    ``"first_100_deg"`` and ``"last_100_deg"`` (drift).
     """
     out: dict[str, Any] = {
         "protocol": run.protocol,
+        "convention": convention,
         "frames": int(sum(len(s.reference) for s in run.sequences)),
         "sequences": [s.name for s in run.sequences],
         "methods": {},
     }
     for name in run.methods:
         per = [run.runs[(name, s.name)] for s in run.sequences]
-        est = np.concatenate([r.joints for r in per])
-        filled = np.concatenate([fill_forward(r.joints) for r in per])
+        native = [r.joints for r in per]
+        converted = [to_convention(j, convention) for j in native]
+        est = np.concatenate(converted)
+        filled = np.concatenate([fill_forward(j) for j in converted])
         ref = np.concatenate([s.reference.joints for s in run.sequences])
         ref_angles = np.concatenate([s.reference.angles for s in run.sequences])
+        ref_yaw = facing_yaw(ref)
         hits = sum(r.label_hits for r in per)
         counted = sum(r.label_total for r in per)
         seconds = sum(r.seconds for r in per)
@@ -386,17 +417,25 @@ def summarize(run: EvaluationRun) -> dict:
             "per_sequence": {
                 s.name: {
                     "angle_error_mean_deg": _round(
-                        angle_errors(r.angles, s.reference.angles)["mean"]
+                        angle_errors(joint_angles(j), s.reference.angles)["mean"]
                     ),
-                    "mpjpe_mm": _round(mpjpe_mm(r.joints, s.reference.joints), 2),
-                    "failed_frames": int(np.count_nonzero(failed_frames(r.joints))),
-                    **_drift(r.angles, s.reference.angles),
+                    "mpjpe_mm": _round(mpjpe_mm(j, s.reference.joints), 2),
+                    "failed_frames": int(np.count_nonzero(failed_frames(j))),
+                    **_drift(joint_angles(j), s.reference.angles),
                 }
-                for s, r in zip(run.sequences, per, strict=True)
+                for s, j in zip(run.sequences, converted, strict=True)
             },
             "method_errors": sum(len(r.errors) for r in per),
             "status_counts": _status_counts(per),
+            "by_view": _by_view(joint_angles(est), ref_angles, ref_yaw),
         }
+        if convention != "native":
+            raw = np.concatenate(native)
+            row["native"] = {
+                "angle_error_mean_deg": _round(angle_errors(joint_angles(raw), ref_angles)["mean"]),
+                "mpjpe_mm": _round(mpjpe_mm(raw, ref), 2),
+                "map_10cm": _round(map_at(raw, ref, 0.10)),
+            }
         out["methods"][name] = row
     return out
 
@@ -409,6 +448,7 @@ def evaluate(
     progress: bool = True,
     figures_dir: str | Path | None = None,
     protocol: str | None = None,
+    convention: str = "native",
 ) -> dict:
     """Evaluate methods on sequences: the JSON of ``posedrift eval`` (``METHOD.md`` section 6).
 
@@ -425,6 +465,9 @@ def evaluate(
         Write the figures (Fig. 9, 6, 12 of the paper) there as PNG files.
     protocol : str, optional
         ``"synthetic"`` or ``"utd"`` (inferred by default).
+    convention : str
+        Skeleton convention of the reference (:data:`posedrift.skeleton.CONVENTIONS`):
+        the methods' joints are converted to it before scoring (see :func:`summarize`).
 
     Returns
     -------
@@ -433,6 +476,10 @@ def evaluate(
         "mpjpe_mm", "map_10cm", "label_accuracy", "frames_per_second",
         "failed_frames", ...}}}`` (see :func:`summarize`).
     """
+    if convention not in CONVENTIONS:
+        raise ValueError(
+            f"Unknown joint convention {convention!r}: expected one of {sorted(CONVENTIONS)}."
+        )
     run = run_methods(
         sequences,
         methods,
@@ -441,7 +488,7 @@ def evaluate(
         protocol=protocol,
         keep_frames=figures_dir is not None,
     )
-    report = summarize(run)
+    report = summarize(run, convention=convention)
     if figures_dir is not None:
         from posedrift.evaluation._figures import write_figures
 
@@ -452,6 +499,7 @@ def evaluate(
 __all__ = [
     "DEFAULT_METHODS",
     "METHODS",
+    "VIEWS",
     "EvaluationRun",
     "MethodRun",
     "SequenceRecord",

@@ -84,6 +84,18 @@ def markdown_table(report: Mapping, *, paper: bool = True) -> str:
             cells += [f"*{values[-1]:.2f}*", "-", "-", "-", "-"]
             lines.append("| " + " | ".join(cells) + " |")
     text = "\n".join(lines) + "\n"
+    convention = report.get("convention", "native")
+    if convention != "native":
+        native = ", ".join(
+            f"{name} {_fmt(row['native'].get('mpjpe_mm'), 1)} mm / "
+            f"{_fmt(row['native'].get('map_10cm'), 3)}"
+            for name, row in report["methods"].items()
+            if "native" in row
+        )
+        text += (
+            f"\nJoints scored in the {convention} convention (fixed per-joint offsets, "
+            f"posedrift.skeleton.to_convention). Unconverted MPJPE / mAP@10cm: {native}.\n"
+        )
     if paper:
         text += (
             "\nRows marked *paper* are the paper's Table 1, measured on its own synthetic data "

@@ -1,6 +1,12 @@
 """The 15-joint skeleton, the 15 body parts, and the eight joint angles."""
 
-from posedrift.skeleton._angles import angles_dict, joint_angles, pelvis_centre
+from posedrift.skeleton._angles import angles_dict, facing_yaw, joint_angles, pelvis_centre
+from posedrift.skeleton._convention import (
+    CONVENTIONS,
+    body_frame,
+    fit_convention,
+    to_convention,
+)
 from posedrift.skeleton._definitions import (
     ANGLE_NAMES,
     EXTRA_POINT_NAMES,
@@ -17,6 +23,7 @@ from posedrift.skeleton._tpose import t_pose_joints
 
 __all__ = [
     "ANGLE_NAMES",
+    "CONVENTIONS",
     "EXTRA_POINT_NAMES",
     "JOINT_INDEX",
     "JOINT_NAMES",
@@ -27,9 +34,13 @@ __all__ = [
     "PART_NAMES",
     "SEGMENT_RATIOS",
     "angles_dict",
+    "body_frame",
+    "facing_yaw",
+    "fit_convention",
     "joint_angles",
     "pelvis_centre",
     "t_pose_joints",
+    "to_convention",
 ]
 
 from posedrift.skeleton._fit import (

@@ -92,3 +92,50 @@ def angles_dict(angles: np.ndarray) -> dict[str, float | None]:
         name: (None if not np.isfinite(value) else float(value))
         for name, value in zip(ANGLE_NAMES, np.asarray(angles, dtype=float), strict=True)
     }
+
+
+def facing_yaw(joints: np.ndarray, *, up: np.ndarray | None = None) -> np.ndarray:
+    """How far the person is turned away from the camera, in degrees.
+
+    The person's facing direction is horizontal and at right angles to the line
+    from the right to the left hip and shoulder (averaged); ``facing_yaw`` is its
+    angle to the direction from the pelvis to the camera (the origin of the camera
+    frame): 0 faces the camera, 90 a side view, 180 the back to the camera.
+
+    Parameters
+    ----------
+    joints : (..., 15, 3) float
+        Camera frame (OpenCV: +Y down), metres.
+    up : (3,) float, optional
+        The world's up direction in the camera frame; default ``(0, -1, 0)``.
+
+    Returns
+    -------
+    (...) float
+        Degrees in [0, 180]; NaN where the hips and shoulders are unknown.
+
+    Examples
+    --------
+    >>> from posedrift.skeleton import t_pose_joints
+    >>> world = t_pose_joints(1.75)  # +Y up, facing +Z
+    >>> camera = world * [1.0, -1.0, -1.0] + [0.0, 0.0, 3.0]  # seen from +Z, 3 m away
+    >>> round(float(facing_yaw(camera)), 6)
+    0.0
+    >>> turned = camera * [-1.0, 1.0, -1.0] + [0.0, 0.0, 6.0]  # turned about the vertical
+    >>> round(float(facing_yaw(turned)), 6)
+    180.0
+    """
+    joints = np.asarray(joints, dtype=float)
+    up = np.array([0.0, -1.0, 0.0]) if up is None else np.asarray(up, dtype=float)
+    j = JOINT_INDEX
+    across = (
+        joints[..., j["left_hip"], :]
+        - joints[..., j["right_hip"], :]
+        + joints[..., j["left_shoulder"], :]
+        - joints[..., j["right_shoulder"], :]
+    )
+    facing = np.cross(across, up)  # left x up = forward for a right-handed body frame
+    facing = facing - (facing @ up)[..., None] * up
+    to_camera = -pelvis_centre(joints)
+    to_camera = to_camera - (to_camera @ up)[..., None] * up
+    return _angle_between(facing, to_camera)

@@ -88,8 +88,6 @@ def assess(
     min_measured: float = 0.5,
     slack: float = 0.06,
     max_joint_gap: float = 0.15,
-    part_counts: np.ndarray | None = None,
-    min_part_share: float = 0.3,
 ) -> Health:
     """Judge one frame's registration and skeleton fit.
 
@@ -112,10 +110,6 @@ def assess(
     max_joint_gap : float
         Largest distance (metres) from a limb joint to the nearest point: a hand
         or foot floating beside the body is lost.
-    part_counts : (15,) float, optional
-        Each part's share of the points at calibration; an arm or leg segment whose
-        share falls below ``min_part_share`` of it has been eaten by its neighbours
-        (hands and feet are too small to judge this way).
 
     Returns
     -------
@@ -161,15 +155,6 @@ def assess(
             unexplained,
             meas,
         )
-    if part_counts is not None:
-        share = np.bincount(lab[(lab >= 0) & (lab < 15)], minlength=15) / max(len(lab), 1)
-        arms_legs = np.array([3, 4, 5, 6, 9, 10, 11, 12])  # upper arms, forearms, thighs, shanks
-        low = share[arms_legs] < min_part_share * np.asarray(part_counts)[arms_legs]
-        if low.any():
-            name = PART_NAMES[int(arms_legs[np.argmax(low)])]
-            return Health(
-                False, f"the {name} has lost most of its points", score + 0.3, unexplained, meas
-            )
     if sigma is not None and np.isfinite(sigma) and sigma > max_sigma:
         return Health(
             False, f"the registration residual is {100 * sigma:.1f} cm", score, unexplained, meas

@@ -264,7 +264,6 @@ class PoseTracker:
         self._calibration: Calibration | None = None
         self._voxel: float | None = None
         self._seed_registration = None
-        self._part_share: np.ndarray | None = None
 
     @property
     def calibration(self) -> Calibration | None:
@@ -563,7 +562,6 @@ class PoseTracker:
             fit.measured,
             height=cal.height,
             sigma=sigma,
-            part_counts=self._part_share,
         )
         return _Attempt(labels=labels, fit=fit, health=health)
 
@@ -591,21 +589,21 @@ class PoseTracker:
         sources = [forest]
         if not (isinstance(forest, str) and forest == "geometric"):
             sources.append("geometric")
-        saved = (self._calibration, self._part_share)
+        saved = self._calibration
         best = None
         for source in sources:
-            self._calibration, self._part_share = saved
+            self._calibration = saved
             attempt = self._initialize_from(source, depth, intr, mask, full, pixels, points, graph)
             if attempt is not None and (
                 best is None or attempt.health.score < best[0].health.score
             ):
-                best = (attempt, self._calibration, self._part_share)
+                best = (attempt, self._calibration)
             if best is not None and best[0].health.ok:
                 break
         if best is None:
-            self._calibration, self._part_share = saved
+            self._calibration = saved
             return None
-        attempt, self._calibration, self._part_share = best
+        attempt, self._calibration = best
         return attempt
 
     def _initialize_from(
@@ -642,7 +640,6 @@ class PoseTracker:
         cal = self._calibration
         anchors = bone_anchors(attempt.fit.joints, cal.bone_lengths)
         if fresh_calibration:
-            self._part_share = np.bincount(labels[labels >= 0], minlength=N_PARTS) / len(labels)
             reach = measure_reach(graph, points, labels, anchors, height=cal.height)
             self._calibration = cal = replace(cal, reach=reach)
         if self.relabel:  # Clean the forest's labels with Algorithm 2 and refit.

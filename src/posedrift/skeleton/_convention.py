@@ -1,0 +1,165 @@
+"""Joint conventions: where another skeleton puts the same 15 joints.
+
+Skeletons agree on the names of the joints, not on where they lie: the Kinect v1
+SDK's hips sit higher and closer together than the ones recovered here from the
+body-part boundaries, its shoulders lower, and so on. These differences are
+systematic, so a reference skeleton of another convention is compared fairly once
+each recovered joint has been moved by a fixed offset in the person's own frame
+(:func:`body_frame`), scaled by the trunk length. The offsets of a convention are
+fitted once on development data (:func:`fit_convention`) and then applied to any
+new sequence (:func:`to_convention`): no reference enters a conversion.
+"""
+
+from __future__ import annotations
+
+from types import MappingProxyType
+
+import numpy as np
+
+from posedrift.skeleton._definitions import JOINT_INDEX, JOINT_NAMES
+
+_J = JOINT_INDEX
+
+# Kinect v1 SDK skeleton (UTD-MHAD's), relative to this package's: per joint, the
+# offset (x to the person's left, y up the trunk, z forward; in trunk lengths, neck
+# to pelvis centre). Fitted by `python scripts/fit_kinect_convention.py` on the
+# development UTD-MHAD sequences (subjects 1-4, trial 1, 108 sequences) from the
+# default PoseTracker's output; docs/RESULTS.md gives the cross-validated effect.
+_KINECT_OFFSETS = np.array(
+    [
+        [-0.032, 0.025, -0.052],  # head
+        [-0.028, -0.059, -0.024],  # neck
+        [-0.004, -0.106, -0.021],  # right_shoulder
+        [-0.047, -0.162, -0.029],  # left_shoulder
+        [-0.021, -0.149, 0.003],  # right_elbow
+        [-0.053, -0.218, -0.008],  # left_elbow
+        [-0.0, -0.123, 0.043],  # right_hand
+        [-0.071, -0.2, 0.036],  # left_hand
+        [-0.033, 0.018, -0.005],  # torso
+        [0.056, 0.104, 0.009],  # right_hip
+        [-0.139, 0.093, 0.024],  # left_hip
+        [-0.003, 0.005, -0.057],  # right_knee
+        [-0.05, 0.001, -0.054],  # left_knee
+        [0.029, 0.045, 0.017],  # right_foot
+        [-0.103, 0.048, -0.028],  # left_foot
+    ]
+)
+_KINECT_OFFSETS.setflags(write=False)
+
+CONVENTIONS = MappingProxyType(
+    {"native": np.zeros((len(JOINT_NAMES), 3)), "kinect": _KINECT_OFFSETS}
+)
+"""Offsets ``(15, 3)`` of each known convention (see :func:`to_convention`)."""
+
+
+def body_frame(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The person's own frame and trunk length, from a skeleton.
+
+    Axes: ``x`` from the right to the left hip and shoulder (averaged), ``y`` from the
+    pelvis centre up to the neck, ``z = x cross y`` (forward); orthonormal.
+
+    Parameters
+    ----------
+    joints : (..., 15, 3) float
+        Metres, any frame.
+
+    Returns
+    -------
+    axes : (..., 3, 3) float
+        Rows are the unit ``x``, ``y``, ``z`` axes in the input frame; NaN where
+        the hips, shoulders or neck are unknown or degenerate.
+    trunk : (...) float
+        Distance from the pelvis centre to the neck, metres.
+    """
+    j = np.asarray(joints, dtype=float)
+    pelvis = 0.5 * (j[..., _J["left_hip"], :] + j[..., _J["right_hip"], :])
+    up = j[..., _J["neck"], :] - pelvis
+    trunk = np.linalg.norm(up, axis=-1)
+    across = (
+        j[..., _J["left_hip"], :]
+        - j[..., _J["right_hip"], :]
+        + j[..., _J["left_shoulder"], :]
+        - j[..., _J["right_shoulder"], :]
+    )
+    with np.errstate(invalid="ignore", divide="ignore"):
+        y = up / trunk[..., None]
+        x = across - np.sum(across * y, axis=-1, keepdims=True) * y
+        x = x / np.linalg.norm(x, axis=-1, keepdims=True)
+    z = np.cross(x, y)
+    return np.stack([x, y, z], axis=-2), trunk
+
+
+def to_convention(joints: np.ndarray, convention: str = "kinect") -> np.ndarray:
+    """Move recovered joints to where another skeleton convention puts them.
+
+    Parameters
+    ----------
+    joints : (..., 15, 3) float
+        Recovered joints (this package's convention), metres.
+    convention : str
+        A key of :data:`CONVENTIONS`: ``"native"`` (unchanged) or ``"kinect"``
+        (the Kinect v1 SDK skeleton, as in UTD-MHAD).
+
+    Returns
+    -------
+    (..., 15, 3) float
+        NaN where the body frame is unknown.
+
+    Examples
+    --------
+    >>> from posedrift.skeleton import t_pose_joints
+    >>> joints = t_pose_joints(1.75)
+    >>> bool(np.array_equal(to_convention(joints, "native"), joints))
+    True
+    >>> moved = to_convention(joints, "kinect")
+    >>> bool(moved[JOINT_INDEX["right_hip"], 1] > joints[JOINT_INDEX["right_hip"], 1])
+    True
+    """
+    if convention not in CONVENTIONS:
+        raise ValueError(
+            f"Unknown joint convention {convention!r}: expected one of {sorted(CONVENTIONS)}."
+        )
+    joints = np.asarray(joints, dtype=float)
+    if joints.shape[-2:] != (len(JOINT_NAMES), 3):
+        raise ValueError(f"'joints' must be (..., 15, 3). Got {joints.shape}.")
+    if convention == "native":
+        return joints.copy()
+    axes, trunk = body_frame(joints)
+    offsets = np.einsum("...ab,ja->...jb", axes, CONVENTIONS[convention])
+    return joints + offsets * trunk[..., None, None]
+
+
+def fit_convention(estimates: np.ndarray, references: np.ndarray) -> np.ndarray:
+    """Offsets ``(15, 3)`` that take recovered joints to a reference convention.
+
+    The median, over frames where both skeletons are known, of each reference
+    joint's offset from the recovered one, in the recovered skeleton's body frame
+    and trunk lengths (what :func:`to_convention` applies).
+
+    Parameters
+    ----------
+    estimates, references : (T, 15, 3) float
+        The same frames, metres.
+
+    Returns
+    -------
+    (15, 3) float
+    """
+    est = np.asarray(estimates, dtype=float)
+    ref = np.asarray(references, dtype=float)
+    if est.shape != ref.shape or est.shape[-2:] != (len(JOINT_NAMES), 3) or est.ndim != 3:
+        raise ValueError(
+            "'estimates' and 'references' must both be (T, 15, 3). "
+            f"Got {est.shape} and {ref.shape}."
+        )
+    axes, trunk = body_frame(est)
+    ok = (
+        np.isfinite(est).all(axis=(1, 2))
+        & np.isfinite(ref).all(axis=(1, 2))
+        & np.isfinite(axes).all(axis=(1, 2))
+        & (trunk > 1e-6)
+    )
+    if not ok.any():
+        raise ValueError("fit_convention needs at least one frame where both skeletons are known.")
+    local = np.einsum("tab,tjb->tja", axes[ok], ref[ok] - est[ok]) / trunk[ok, None, None]
+    return np.median(local, axis=0)
