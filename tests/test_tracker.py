@@ -222,6 +222,9 @@ def test_appearance_weight_zero_is_the_pure_tracker(sequence):
         PoseTracker(K, appearance_weight=-1.0)
     with pytest.raises(ValueError, match="'appearance_floor' parameter of PoseTracker"):
         PoseTracker(K, appearance_floor=-0.1)
+    for bad in (-0.1, 1.0):
+        with pytest.raises(ValueError, match="'temporal_smoothing' parameter of PoseTracker"):
+            PoseTracker(K, temporal_smoothing=bad)
 
 
 def test_fused_tracker_keeps_its_labels_on_a_rendered_clip(sequence):

@@ -144,6 +144,11 @@ class PoseTracker:
     appearance_floor : float
         Floor added to the forest's probabilities before fusion (how far a
         confident forest may overrule the track).
+    temporal_smoothing : float
+        In [0, 1): weight of the predicted joints in each fitted joint (when
+        tracking, the previous skeleton moved by the registration's warp, so
+        motion-compensated; when re-initializing, the last pose moved with the
+        body). Steadies the joints against label noise; 0 fits every frame afresh.
     rng : int or Generator
         Seeds downsampling and RANSAC (runs are repeatable for an int).
 
@@ -186,6 +191,7 @@ class PoseTracker:
         min_points: int = 60,
         appearance_weight: float = 3.0,
         appearance_floor: float = 0.01,
+        temporal_smoothing: float = 0.3,
         rng: int | np.random.Generator | None = 0,
     ) -> None:
         caller = "PoseTracker"
@@ -241,6 +247,14 @@ class PoseTracker:
         )
         self.appearance_floor = check_scalar(
             appearance_floor, "appearance_floor", low=0.0, include_low=True, caller=caller
+        )
+        self.temporal_smoothing = check_scalar(
+            temporal_smoothing,
+            "temporal_smoothing",
+            low=0.0,
+            high=1.0,
+            include_low=True,
+            caller=caller,
         )
         self.relabel = bool(relabel)
         self.registration = registration
@@ -554,6 +568,7 @@ class PoseTracker:
             modes=modes,
             prediction=prediction,
             height=cal.height,
+            smoothing=self.temporal_smoothing,
         )
         health = assess(
             points,
