@@ -115,14 +115,31 @@ def test_identity_gives_no_motion(body, register):
     assert res.sigma2 < 1e-8
 
 
-@pytest.mark.parametrize("register", [register_rigid, register_affine, register_nonrigid])
-def test_scaling_both_sets_by_1000_changes_nothing(body, register):
+EXACT = {"low_rank": None, "accelerate": False}  # step-for-step CPD, not the defaults
+
+
+@pytest.mark.parametrize(
+    ("register", "options"),
+    [(register_rigid, {}), (register_affine, {}), (register_nonrigid, EXACT)],
+)
+def test_scaling_both_sets_by_1000_changes_nothing(body, register, options):
     target = _smooth_warp(body)[::-1]
-    a = register(body, target)
-    b = register(1000 * body, 1000 * target)
+    a = register(body, target, **options)
+    b = register(1000 * body, 1000 * target, **options)
     assert a.iterations == b.iterations
     np.testing.assert_allclose(b.moved / 1000, a.moved, atol=1e-9)
     assert b.sigma2 / 1e6 == pytest.approx(a.sigma2, rel=1e-6)
+
+
+def test_scaling_with_the_default_fast_path(body):
+    # the defaults (low-rank factor, SQUAREM, exact polish) agree across units to far
+    # below tol, on noisy data (no polish) and noise-free data (polished)
+    truth, noisy = _noisy_problem(body)
+    for target in (noisy, truth[::-1]):
+        a = register_nonrigid(body, target)
+        b = register_nonrigid(1000 * body, 1000 * target)
+        assert a.iterations == b.iterations
+        np.testing.assert_allclose(b.moved / 1000, a.moved, atol=1e-7)
 
 
 def test_correspondence_and_label_transfer(body):
@@ -164,11 +181,15 @@ def test_warm_start_cuts_iterations_at_equal_accuracy(body):
 def test_low_rank_and_float32_match_exact(body):
     noise = np.random.default_rng(6).normal(scale=0.001, size=body.shape)  # 1 mm
     target = _with_outliers(_smooth_warp(body) + noise, 0.1, rng=5)
-    exact = register_nonrigid(body, target)
-    low = register_nonrigid(body, target, low_rank=80)
-    single = register_nonrigid(body, target, dtype=np.float32)
+    exact = register_nonrigid(body, target, **EXACT)
+    low = register_nonrigid(body, target, low_rank=80, accelerate=False)
+    single = register_nonrigid(body, target, dtype=np.float32, **EXACT)
+    fast = register_nonrigid(body, target)  # the defaults
+    fast32 = register_nonrigid(body, target, dtype=np.float32)
     assert _rms(low.moved, exact.moved) < 5e-4
     assert _rms(single.moved, exact.moved) < 5e-4
+    assert _rms(fast.moved, exact.moved) < 5e-5  # 0.05 mm
+    assert _rms(fast32.moved, fast.moved) < 5e-5
     assert low.kind == "nonrigid"
     np.testing.assert_allclose(low.apply(body), low.moved, atol=2e-3)
 
@@ -208,6 +229,7 @@ def test_agrees_with_pycpd_nonrigid(small_pair, compiled):
             max_iter=25,
             normalize=False,
             compiled=compiled,
+            **EXACT,
         )
     np.testing.assert_allclose(res.moved, moved, atol=1e-8, rtol=0)
     assert res.sigma2 == pytest.approx(reg.sigma2, rel=1e-8)
@@ -244,6 +266,40 @@ def test_compiled_estep_matches_numpy_twin(d):
             for a, b in zip(got[:3], ref[:3], strict=True):
                 np.testing.assert_allclose(a, b, atol=1e-10, rtol=1e-10)
             assert got[3] == pytest.approx(ref[3], rel=1e-12, abs=1e-9)
+        # float32 kernel against the float32 NumPy twin (float32 rounding: ~1e-6)
+        ref32 = _estep.estep_numpy(x.astype(np.float32), t.astype(np.float32), sigma2, c)
+        got32 = _estep.estep_stats(x, t, sigma2, c, single=True, truncate_eps=1e-7)
+        for a, b in zip(got32[:3], ref32[:3], strict=True):
+            np.testing.assert_allclose(a, b, atol=2e-5 * max(1.0, np.abs(b).max()), rtol=1e-4)
+        assert got32[3] == pytest.approx(ref32[3], rel=1e-5, abs=1e-3)
+
+
+@pytest.mark.skipif(not _estep.has_compiled_kernel(), reason="compiled E-step not built")
+def test_compiled_estep_sums_and_kept_sort_order():
+    rng = np.random.default_rng(5)
+    x, t = rng.normal(size=(300, 3)), rng.normal(size=(250, 3))
+    ref = _estep.estep_numpy(x, t, 0.01, 1e-4)
+    order = np.arange(250, dtype=np.int64)
+    target_order = np.arange(300, dtype=np.int64)
+    for move in (0.0, 0.002, 0.004):  # a moving source re-sorts from the kept order
+        moved = t + move * np.sin(7 * t)
+        fresh = _estep.estep_numpy(x, moved, 0.01, 1e-4)
+        for tord in (None, target_order):  # binary search, or a window sliding over x
+            got = _estep.estep_stats(
+                x, moved, 0.01, 1e-4, truncate_eps=1e-12, order=order, target_order=tord
+            )
+            for a, b in zip(got[:3], fresh[:3], strict=True):
+                np.testing.assert_allclose(a, b, atol=1e-10)
+        axis = np.argmax(np.ptp(moved, axis=0))
+        assert np.array_equal(np.sort(order), np.arange(250))  # still a permutation
+        assert np.all(np.diff(moved[order, axis]) >= 0)
+        assert np.all(np.diff(x[target_order, axis]) >= 0)
+    got = _estep.estep_stats(x, t, 0.01, 1e-4, truncate_eps=1e-12, order=np.zeros(250, int))
+    np.testing.assert_allclose(got[2], ref[2], atol=1e-10)  # a non-permutation is reset
+    assert got[4] == pytest.approx(ref[0].sum(), rel=1e-12)  # sum P1
+    assert got[5] == pytest.approx(ref[1] @ np.sum(x * x, axis=1), rel=1e-12)  # Pt1 . |x|^2
+    with pytest.raises(ValueError, match="buffer 'order'"):
+        _estep._cestep.estep(x, t, 300, 250, 3, 0.01, 1e-4, 0.0, False, *got[:3], order[:5])
 
 
 def test_numpy_estep_blocks_agree(monkeypatch):
@@ -335,11 +391,17 @@ def test_result_is_frozen(body):
 
 def test_works_without_the_compiled_extension(body, monkeypatch):
     target = _smooth_warp(body)
-    with_ext = register_nonrigid(body, target)
+    _, noisy = _noisy_problem(body)
+    with_ext = register_nonrigid(body, target, **EXACT)
+    fast = [register_nonrigid(body, t) for t in (target, noisy)]  # defaults: C M-step too
     monkeypatch.setattr(_estep, "_cestep", None)
     assert not _estep.has_compiled_kernel()
-    without = register_nonrigid(body, target)
+    without = register_nonrigid(body, target, **EXACT)
     np.testing.assert_allclose(without.moved, with_ext.moved, atol=1e-9)
+    for res, t in zip(fast, (target, noisy), strict=True):
+        twin = register_nonrigid(body, t)
+        assert twin.iterations == res.iterations
+        np.testing.assert_allclose(twin.moved, res.moved, atol=1e-8)
 
 
 # --------------------------------------------------------------------------- fast paths
@@ -351,20 +413,20 @@ def _noisy_problem(body, seed=21):
 
 def test_accelerated_em_matches_plain_em_in_fewer_iterations(body):
     truth, target = _noisy_problem(body)
-    plain = register_nonrigid(body, target, tol=1e-8, max_iter=400)
-    fast = register_nonrigid(body, target, tol=1e-8, max_iter=400, accelerate=True)
+    plain = register_nonrigid(body, target, tol=1e-8, max_iter=400, **EXACT)
+    fast = register_nonrigid(body, target, tol=1e-8, max_iter=400, low_rank=None)
     assert fast.converged and plain.converged
     assert fast.iterations < 0.8 * plain.iterations
     assert _rms(fast.moved, plain.moved) < 1e-5  # 0.01 mm: the same fixed point
     assert fast.objective <= plain.objective + 1e-6 * abs(plain.objective)
     assert fast.sigma2 == pytest.approx(plain.sigma2, rel=1e-3)
     # at the default tolerance both stop within 0.1 mm of each other and of the truth
-    a = register_nonrigid(body, target)
-    b = register_nonrigid(body, target, accelerate=True)
+    a = register_nonrigid(body, target, **EXACT)
+    b = register_nonrigid(body, target, low_rank=None, accelerate=True)
     assert _rms(a.moved, b.moved) < 1e-4 and _rms(b.moved, truth) < 2e-3
     np.testing.assert_allclose(b.apply(body), b.moved, atol=1e-9)
     # warm start and acceleration together
-    warm = register_nonrigid(body, target, accelerate=True, warm_start=a)
+    warm = register_nonrigid(body, target, low_rank=None, accelerate=True, warm_start=a)
     assert _rms(warm.moved, truth) < 2e-3
 
 
@@ -372,6 +434,18 @@ def test_accelerated_em_max_iter_counts_m_steps(body):
     with pytest.warns(ConvergenceWarning, match="max_iter=5"):
         res = register_nonrigid(body, _smooth_warp(body), max_iter=5, accelerate=True)
     assert res.iterations == 5 and not res.converged
+
+
+def test_auto_polishes_noise_free_fits_with_the_exact_kernel(body):
+    target = _smooth_warp(body)
+    plain_factor = register_nonrigid(body, target, outlier_weight=0.0, low_rank=64)
+    auto = register_nonrigid(body, target, outlier_weight=0.0)  # the defaults
+    exact = register_nonrigid(body, target, outlier_weight=0.0, **EXACT)
+    assert _rms(plain_factor.moved, target) > 5e-5  # the factor alone: ~0.1 mm
+    assert auto._landmarks is None and auto._coef is not None  # polished: exact W
+    assert _rms(auto.moved, target) < 1e-5 and _rms(auto.moved, exact.moved) < 1e-5
+    _, noisy = _noisy_problem(body)
+    assert register_nonrigid(body, noisy)._landmarks is not None  # 2 mm noise: no polish
 
 
 def test_auto_low_rank_picks_by_kernel_and_matches_exact(body):
@@ -386,7 +460,7 @@ def test_auto_low_rank_picks_by_kernel_and_matches_exact(body):
     # a narrow kernel is not low rank: "auto" keeps the exact solve
     narrow = register_nonrigid(body, target, low_rank="auto", kernel_width=0.3)
     assert narrow._landmarks is None
-    ref = register_nonrigid(body, target, kernel_width=0.3)
+    ref = register_nonrigid(body, target, kernel_width=0.3, low_rank=None)
     np.testing.assert_allclose(narrow.moved, ref.moved, atol=1e-12)
     small = register_nonrigid(body[:50], target, low_rank="auto")  # few points: exact
     assert small._landmarks is None
@@ -418,6 +492,21 @@ def test_m_steps_solve_the_cpd_system():
     # the loop's low-rank step returns Z' W (K' x D) of that same W
     u = _cpd._solve_low_rank(z, p1, px, y, lam * s2)
     np.testing.assert_allclose(u, z.T @ w_lr, atol=1e-8)
+    if _estep.has_compiled_kernel():  # its compiled twin, on Z' padded with zero rows
+        k = z.shape[1]
+        zt = np.zeros((-(-k // 4) * 4, len(y)))
+        zt[:k] = z.T
+        u_c, moved = np.empty((zt.shape[0], 3)), np.empty_like(y)
+        ok, pxm, tpt = _estep._cestep.lowrank_mstep(
+            zt, len(y), zt.shape[0], 3, p1, px, y, lam * s2, u_c, moved
+        )
+        assert ok and np.all(u_c[k:] == 0)
+        np.testing.assert_allclose(u_c[:k], u, atol=1e-8)
+        np.testing.assert_allclose(moved, y + z @ u, atol=1e-10)
+        assert pxm == pytest.approx(np.sum(px * moved), rel=1e-12)
+        assert tpt == pytest.approx(p1 @ np.sum(moved**2, axis=1), rel=1e-12)
+        with pytest.raises(ValueError, match="multiple of 4"):
+            _estep._cestep.lowrank_mstep(zt, len(y), 3, 3, p1, px, y, 1.0, u_c, moved)
     # the Nyström factor of a wide kernel (landmarks numerically dependent, as
     # low_rank="auto" requires) reproduces G to 1e-4 (G's entries are in (0, 1])
     zn, land, proj, kept = _cpd.low_rank_factor(y, 5.0, 64)

@@ -141,7 +141,11 @@ def rms(a: np.ndarray, b: np.ndarray) -> float:
 
 
 # --------------------------------------------------------------------------- runners
-def _run_posedrift(low_rank=None, compiled=True, smoothness=LAMBDA, accelerate=False):
+def _run_posedrift(
+    low_rank="auto", compiled=True, smoothness=LAMBDA, accelerate=True, dtype=np.float64
+):
+    """A runner of ``register_nonrigid``; the keyword defaults are its own defaults."""
+
     def run(source, target):
         from posedrift.registration import ConvergenceWarning, register_nonrigid
 
@@ -158,6 +162,7 @@ def _run_posedrift(low_rank=None, compiled=True, smoothness=LAMBDA, accelerate=F
                 low_rank=low_rank,
                 compiled=compiled,
                 accelerate=accelerate,
+                dtype=dtype,
             )
         return res.moved, res.iterations
 
@@ -221,31 +226,25 @@ def implementations(
 ) -> dict[str, tuple[Callable | None, str | None]]:
     """Name -> (runner or None, skip reason or None) for one problem size."""
     impls: dict[str, tuple[Callable | None, str | None]] = {}
-    if size <= 3000:
-        impls["posedrift"] = (_run_posedrift(None), None)
-    else:
-        impls["posedrift"] = (None, "exact dense solve above 3000 points: see low_rank")
-    impls["posedrift-lowrank100"] = (_run_posedrift(100), None)
-    if size <= 3000:
-        impls["posedrift-accel"] = (_run_posedrift(None, accelerate=True), None)
-    impls["posedrift-auto-accel"] = (_run_posedrift("auto", accelerate=True), None)
-    if size > 400:
-        impls["posedrift-auto-accel-scaled-smoothness"] = (
-            _run_posedrift("auto", smoothness=LAMBDA * size / 400, accelerate=True),
-            None,
-        )
+    exact = {"low_rank": None, "accelerate": False}
+    dense_why = "exact dense solve above 3000 points"
+    # "posedrift" is register_nonrigid's defaults (low_rank="auto", accelerate=True)
+    impls["posedrift"] = (_run_posedrift(), None)
+    impls["posedrift-float32"] = (_run_posedrift(dtype=np.float32), None)
     if size > 400:
         # CPD's regularizer weakens as M grows (G's eigenvalues grow with M): the same
         # prior strength as smoothness=2 at 400 points is 2 M / 400
-        impls["posedrift-lowrank100-scaled-smoothness"] = (
-            _run_posedrift(100, smoothness=LAMBDA * size / 400),
+        impls["posedrift-scaled-smoothness"] = (
+            _run_posedrift(smoothness=LAMBDA * size / 400),
             None,
         )
-    impls["posedrift-numpy"] = (
-        (_run_posedrift(None, compiled=False), None)
-        if size <= 3000
-        else (None, "exact dense solve above 3000 points")
-    )
+    if size <= 3000:
+        impls["posedrift-exact"] = (_run_posedrift(**exact), None)
+        impls["posedrift-exact-accel"] = (_run_posedrift(None, accelerate=True), None)
+        impls["posedrift-exact-numpy"] = (_run_posedrift(**exact, compiled=False), None)
+    else:
+        impls["posedrift-exact"] = (None, f"{dense_why}: see low_rank")
+    impls["posedrift-lowrank100"] = (_run_posedrift(100, accelerate=False), None)
     why = _peer_available("pycpd")
     if why is None and size > 2000:
         gib = size * size * 1.1 * 3 * 8 / 2**30
@@ -307,10 +306,11 @@ def _thread_limits(threads: int | None):
 
 FRAME_CONFIGS = {
     # name: options of register_nonrigid beyond the benchmark's beta, lambda, w
-    "": {"low_rank": None, "tol": TOL},  # the defaults: keys "cold" and "warm"
-    "lowrank100": {"low_rank": 100, "tol": TOL},
-    "auto-accel": {"low_rank": "auto", "accelerate": True, "tol": TOL},
-    "auto-accel-tol1e-4": {"low_rank": "auto", "accelerate": True, "tol": 1e-4},
+    "": {"tol": TOL},  # the defaults (low_rank="auto", accelerate=True): "cold", "warm"
+    "float32": {"tol": TOL, "dtype": np.float32},
+    "tol1e-4": {"tol": 1e-4},
+    "exact": {"low_rank": None, "accelerate": False, "tol": TOL},
+    "lowrank100": {"low_rank": 100, "accelerate": False, "tol": TOL},
 }
 
 

@@ -38,7 +38,7 @@ def bench_cpd_command(
 
     Per implementation and size: median wall and CPU (process) time, iterations, RMS
     error to the true correspondences and peak memory, under each thread limit; plus
-    cold vs warm-started frame-to-frame registrations (exact, low rank, accelerated).
+    cold vs warm-started frame-to-frame registrations (defaults, float32, exact, low rank).
     Missing peers are reported as skipped.
 
     Example: posedrift bench cpd --sizes 400,2000,10000 --json cpd.json --markdown cpd.md

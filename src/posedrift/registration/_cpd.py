@@ -14,6 +14,7 @@ References
 from __future__ import annotations
 
 import functools
+import math
 import warnings
 
 import numpy as np
@@ -107,6 +108,7 @@ def low_rank_kernel(source: np.ndarray, beta: float, rank: int) -> np.ndarray:
 _AUTO_RANK = 64  # landmarks tried by low_rank="auto"
 _AUTO_SATURATED = 0.8  # low rank when at most this share of them is numerically independent
 _AUTO_EXACT_MAX = 3000  # above this, "auto" never builds the dense M x M kernel
+_AUTO_POLISH = 0.01  # "auto" polishes with the exact kernel when lambda sigma2 < this * trace
 
 
 def _choose_kernel(src_n: np.ndarray, beta: float, low_rank):
@@ -276,11 +278,11 @@ def register_nonrigid(
     tol: float = 1e-5,
     max_iter: int = 150,
     normalize: bool = True,
-    low_rank: int | str | None = None,
+    low_rank: int | str | None = "auto",
     dtype=np.float64,
     warm_start: CPDResult | None = None,
     compiled: bool = True,
-    accelerate: bool = False,
+    accelerate: bool = True,
 ) -> CPDResult:
     """Nonrigid Coherent Point Drift: ``T(Y) = Y + G W`` with a Gaussian kernel G.
 
@@ -306,41 +308,49 @@ def register_nonrigid(
         Register in coordinates where the target has zero mean and unit RMS radius (one
         similarity applied to both sets), so ``kernel_width``, ``smoothness`` and ``tol``
         do not depend on units. Results are returned in input units.
-    low_rank : None, int or "auto"
-        None (the default): exact dense kernel and a Cholesky M-step (O(M^3) per
-        iteration, M x M memory: fine up to a few thousand points). An int K: a
-        rank-K Nyström factor ``G ~ Z Z'`` (K landmark points drawn with a fixed
-        seed; eigenvalues of the landmark kernel below 1e-10 of the largest dropped,
-        K' <= K kept) and a K' x K' Woodbury M-step: O(M K'^2) per iteration, O(M K)
-        memory. "auto": exact up to 64 points; above, the 64-landmark factor when
-        at most 80% of the landmark kernel's eigenvalues exceed 1e-10 of the largest
-        (the landmarks span G: with ``kernel_width=2`` on a body K' is about 50,
-        0.012 mm RMS from the exact solve at 400 points with noise and outliers), else
-        the exact solve up to 3,000 points and the 64-landmark factor above. Narrow
-        kernels (``kernel_width=0.5`` at 400 points) stay exact under "auto". Low
-        rank is not the default: on noise-free data the exact solve fits to the
-        micrometre while the factor leaves ~0.1 mm, and its result is less stable to
-        rounding (1e-7 relative between builds), see docs/BENCHMARKS.md.
+    low_rank : "auto", None or int
+        "auto" (the default): exact up to 64 points; above, a 64-landmark Nyström
+        factor ``G ~ Z Z'`` when at most 80% of the landmark kernel's eigenvalues
+        exceed 1e-10 of the largest (the landmarks span G: with ``kernel_width=2`` on
+        a body K' is about 50), else the exact solve up to 3,000 points and the
+        factor above. Narrow kernels (``kernel_width=0.5`` at 400 points) stay exact.
+        At convergence "auto" checks the factor: when ``smoothness * sigma2`` is below
+        1% of its trace error ``sum_m (1 - |z_m|^2)`` (a fit finer than the factor
+        can follow: near noise-free data) it goes on with the exact kernel to the
+        exact fixed point (up to 3,000 points). So the defaults recover noise-free
+        warps to the micrometre like the exact solve, and noisy data (sensor noise of
+        a millimetre or more) never pay for the exact solve: the factor moves the
+        result 0.012-0.036 mm RMS from the exact solve's with 2-3 mm noise. None:
+        exact dense kernel and a Cholesky M-step (O(M^3) per iteration, M x M
+        memory: fine up to a few thousand points). An int K: a rank-K factor (K
+        landmarks drawn with a fixed seed; landmark eigenvalues below 1e-10 of the
+        largest dropped, K' <= K kept) and a K' x K' Woodbury M-step, O(M K'^2) per
+        iteration and O(M K) memory, without the exact polish.
     dtype : numpy.float32 or numpy.float64
-        Precision of the E-step (the dominant cost); statistics accumulate and the
-        M-step runs in float64.
+        Precision of the E-step (the dominant cost): float32 computes the kernel
+        values and exponentials in float32 (16 per AVX-512 vector: 1.15-1.6x faster
+        registrations), statistics accumulate and the M-step runs in float64.
     warm_start : CPDResult or None
         A previous result (e.g. the previous frame's). Its final ``sigma2`` (input
         units, re-normalized) replaces the closed-form initial sigma^2. The source set
         may differ from the previous one, so W is not transferred.
     compiled : bool
-        Use the compiled E-step when built (``False`` forces the NumPy twin).
+        Use the compiled E-step and low-rank M-step when built (``False`` forces
+        their NumPy twins).
     accelerate : bool
-        Default False (plain EM). True: SQUAREM extrapolation of EM (Varadhan &
-        Roland 2008, scheme S3) on (W, T, log sigma^2): every second M-step, the
-        last two EM steps give a steplength and an extrapolated point, kept only
-        when its objective is no worse than the EM iterate's (else plain EM goes
-        on). The fixed points are EM's; the result differs from plain EM by what
-        ``tol`` allows (0.04-0.06 mm RMS at 400-2,000 points with ``tol=1e-5``) in
-        about half the iterations. Not the default: the accept test makes the path
-        (not the fixed point) sensitive to rounding, so results agree to ``tol``,
-        not to 1e-9, across builds and unit scalings. ``False``: plain EM, step for
-        step as in [1] (and pycpd).
+        Default True: SQUAREM extrapolation of EM (Varadhan & Roland 2008, scheme S3)
+        on (W, T, log sigma^2): every second M-step, the last two EM steps give a
+        steplength and an extrapolated point, kept only when its objective is no
+        worse than the EM iterate's (else plain EM goes on). The fixed points are
+        EM's; the result differs from plain EM by what ``tol`` allows (0.04-0.06 mm
+        RMS at 400-2,000 points with ``tol=1e-5``) in about half the iterations.
+        ``False``: plain EM, step for step as in [1] (and pycpd).
+
+    The exact, step-for-step CPD of [1] is ``low_rank=None, accelerate=False``: it
+    agrees with pycpd to 1e-8 and with itself across unit scalings and E-step
+    builds to 1e-9. The defaults are the fast configuration (8x fewer CPU seconds
+    at 400 points, 38x at 2,000; docs/BENCHMARKS.md) and agree with it to ``tol``
+    (0.04 mm RMS apart on the 400-point benchmark problem).
 
     Returns
     -------
@@ -360,15 +370,15 @@ def register_nonrigid(
     Notes
     -----
     Frame-to-frame tracking: call ``register_nonrigid(prev_points, points,
-    warm_start=prev_result, accelerate=True, tol=1e-4)`` each frame (and
-    ``low_rank="auto"``, which is exact for narrow kernels). Only sigma^2 is
+    warm_start=prev_result, tol=1e-4)`` each frame. Only sigma^2 is
     transferred (the source set changes every frame, so W and the posterior cannot
     be; starting from the previous displacement field as a constant-velocity guess was
     measured and cost iterations). On 400-point humanoid frames 3 degrees apart
-    (``kernel_width=2``) warm start, acceleration and ``tol=1e-4`` took 6 M-steps and
-    3.3 ms instead of 11-32 and 18-47 ms for the defaults, at equal RMS to the
-    truth (``tol=1e-4`` stops before CPD slides points along the resampled surface;
-    docs/BENCHMARKS.md). Labels pass through :meth:`CPDResult.transfer_labels`.
+    (``kernel_width=2``) warm start and ``tol=1e-4`` took 6 M-steps and 1.5-2.2 ms
+    CPU with the defaults, against 11-32 M-steps and 17-47 ms for the exact plain
+    EM, at equal RMS to the truth (``tol=1e-4`` stops before CPD slides points along
+    the resampled surface; docs/BENCHMARKS.md). Labels pass through
+    :meth:`CPDResult.transfer_labels`.
     CPD's regularizer weakens as M grows (the eigenvalues of G grow with M):
     ``smoothness`` tuned at 400 points corresponds to about ``smoothness * M / 400``
     at M points.
@@ -403,40 +413,80 @@ def register_nonrigid(
     centre, unit = _normalization(tgt, normalize)
     tgt_n = (tgt - centre) / unit
     src_n = (src - centre) / unit
-    tgt_e = tgt_n.astype(dt)
+    single = dt == np.float32
     g, lowrank = _choose_kernel(src_n, beta, low_rank)
-    z = None if lowrank is None else lowrank[0]
-    floor = _SIGMA2_FLOOR_32 if dt == np.float32 else _SIGMA2_FLOOR
-    xx = np.einsum("ij,ij->i", tgt_n, tgt_n)
+    z = None if lowrank is None else np.ascontiguousarray(lowrank[0])
+    floor = _SIGMA2_FLOOR_32 if single else _SIGMA2_FLOOR
     half_lam = 0.5 * lam
+    zt_pad = None  # the compiled low-rank M-step's Z' (K', M), padded to K' = 0 mod 4
+    if z is not None and compiled and _estep.has_compiled_kernel():
+        zt_pad = np.zeros((-(-z.shape[1] // 4) * 4, m))
+        zt_pad[: z.shape[1]] = z.T
+    order = np.arange(m, dtype=np.int64)  # the compiled E-step's sorts, kept between calls
+    target_order = np.arange(n, dtype=np.int64)
 
     def e_step(state):
         """Posterior statistics and the objective at ``state = (W, moved, sigma2)``."""
         wm, mv, s2 = state
         c = outlier_constant(s2, w, m, n, d)
-        p1, pt1, px, log_den = _estep.estep(
-            tgt_e, mv.astype(dt), s2, c, compiled=compiled, truncate_eps=_TRUNCATE_EPS
+        stats = _estep.estep_stats(
+            tgt_n,
+            mv,
+            s2,
+            c,
+            compiled=compiled,
+            truncate_eps=_TRUNCATE_EPS,
+            single=single,
+            order=order,
+            target_order=target_order,
         )
         # tr(W' G W): W . (T - Y) exactly; with G ~ Z Z' and wm = Z' W it is |wm|^2
-        reg = float(np.sum(wm * (mv - src_n))) if z is None else float(np.sum(wm * wm))
-        obj = -log_den + 0.5 * n * d * np.log(s2) + half_lam * reg
-        return (p1, pt1, px, c), obj
+        reg = float(np.sum(wm * (mv - src_n))) if z is None else float(np.vdot(wm, wm))
+        obj = -stats[3] + 0.5 * n * d * math.log(s2) + half_lam * reg
+        return (*stats, c), obj
 
     work = None if g is None else np.empty_like(g)
 
     def m_step(stats, s2):
-        p1, pt1, px, _ = stats
-        np_ = float(p1.sum())
+        p1, _, px, _, np_, xpx, _ = stats
         if z is None:
             wm = _solve_nonrigid(g, None, p1, px, src_n, s2, lam, work)
             mv = src_n + g @ wm
+            pxm = float(np.vdot(px, mv))
+            tpt = float(p1 @ np.einsum("ij,ij->i", mv, mv))
         else:  # the coordinates Z' W of the displacement (K' x D), see _solve_low_rank
-            wm = _solve_low_rank(z, p1, px, src_n, s2 * lam)
-            mv = src_n + z @ wm
-        xpx = float(pt1 @ xx)
-        tpt = float(p1 @ np.einsum("ij,ij->i", mv, mv))
-        s2 = abs(xpx - 2.0 * float(np.sum(px * mv)) + tpt) / (np_ * d)
+            wm = mv = None
+            if zt_pad is not None:
+                u4, mv = np.empty((zt_pad.shape[0], d)), np.empty((m, d))
+                ok, pxm, tpt = _estep._cestep.lowrank_mstep(
+                    zt_pad, m, zt_pad.shape[0], d, p1, px, src_n, s2 * lam, u4, mv
+                )
+                # the zero rows of the padded factor give zero rows of U: drop them
+                wm = u4[: z.shape[1]] if ok else None
+            if wm is None:
+                wm = _solve_low_rank(z, p1, px, src_n, s2 * lam)
+                mv = src_n + z @ wm
+                pxm = float(np.vdot(px, mv))
+                tpt = float(p1 @ np.einsum("ij,ij->i", mv, mv))
+        s2 = abs(xpx - 2.0 * pxm + tpt) / (np_ * d)
         return wm, mv, max(s2, floor)
+
+    # low_rank="auto" checks the factor at convergence: when the fit is finer than the
+    # factor (lambda sigma^2 below _AUTO_POLISH of its trace error sum_m (1 - |z_m|^2),
+    # i.e. near noise-free data) it polishes with the exact kernel (M <= 3000)
+    polish_trace = None
+    if low_rank == "auto" and z is not None and m <= _AUTO_EXACT_MAX:
+        polish_trace = float(m - np.vdot(z, z))
+
+    def switch_to_exact():
+        """True (and the exact kernel in place) when the low-rank fit should be polished."""
+        nonlocal g, z, zt_pad, work, lowrank, polish_trace
+        if polish_trace is None or lam * state[2] >= _AUTO_POLISH * polish_trace:
+            return False
+        polish_trace = lowrank = z = zt_pad = None
+        g = gaussian_kernel(src_n, src_n, beta)
+        work = np.empty_like(g)
+        return True
 
     coef0 = np.zeros((m if z is None else z.shape[1], d))
     state = (coef0, src_n.copy(), _start_sigma2(tgt_n, src_n, warm_start, unit, floor))
@@ -444,10 +494,11 @@ def register_nonrigid(
     converged = False
     it = 0  # M-steps done
     step_max = 4.0
+    no_accel = False  # one plain EM step after the switch to the exact kernel
     while True:
         if it >= max_iter:
             break
-        if float(stats[0].sum()) <= 0.0:  # every target point is an outlier: nothing to fit
+        if stats[4] <= 0.0:  # every target point is an outlier: nothing to fit
             converged = True
             break
         prev_state = state
@@ -456,10 +507,14 @@ def register_nonrigid(
         new_stats, new_obj = e_step(new)
         done = _relative_change(new_obj, objective) <= tol
         state, stats, obj_1, objective = new, new_stats, objective, new_obj
+        if done and switch_to_exact():
+            objective, no_accel = np.inf, True  # W is re-solved, tr(W'GW) with it
+            continue
         if done:
             converged = True
             break
-        if not accelerate or it + 2 > max_iter or float(stats[0].sum()) <= 0.0:
+        if not accelerate or no_accel or it + 2 > max_iter or stats[4] <= 0.0:
+            no_accel = False
             continue
         # SQUAREM (Varadhan & Roland 2008, scheme S3) on (W, moved, log sigma2): one more
         # EM step, a steplength from the two differences, one step from the extrapolation;
@@ -493,10 +548,13 @@ def register_nonrigid(
             stats, new_obj = e_step(theta2)
             state, obj_1, objective = theta2, objective, new_obj
         if _relative_change(objective, obj_1) <= tol:
+            if switch_to_exact():
+                objective, no_accel = np.inf, True
+                continue
             converged = True
             break
     wmat, moved, sigma2 = state
-    c = stats[3]
+    c = stats[6]
     _finish(converged, name, max_iter, tol)
     landmarks = landmark_coef = None
     if lowrank is not None:  # wmat holds Z' W: the field is G(p, landmarks) proj Z' W

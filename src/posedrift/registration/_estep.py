@@ -118,46 +118,104 @@ def estep(
     compiled: bool = True,
     truncate_eps: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """E-step through the compiled kernel (float64 only) when built, else :func:`estep_numpy`.
+    """E-step in the dtype of ``target`` and ``moved``: ``(P1, Pt1, PX, sum log den)``.
 
-    With ``truncate_eps > 0`` (compiled kernel only) the source is sorted along its
-    longest axis and each target point sums only the source points within
-    :func:`truncation_halfwidth` along it: every posterior entry is then exact to
-    ``truncate_eps`` absolute.
+    The compiled kernel when built (``compiled=True``), else :func:`estep_numpy`; see
+    :func:`estep_stats` for ``truncate_eps``.
     """
-    if (
-        compiled
-        and _cestep is not None
-        and target.dtype == np.float64
-        and moved.dtype == np.float64
-    ):
-        n, d = target.shape
-        m = moved.shape[0]
-        p1 = np.zeros(m)
+    single = target.dtype == np.float32 or moved.dtype == np.float32
+    return estep_stats(
+        target.astype(np.float64, copy=False),
+        moved.astype(np.float64, copy=False),
+        sigma2,
+        c,
+        compiled=compiled,
+        truncate_eps=truncate_eps,
+        single=single,
+    )[:4]
+
+
+def estep_stats(
+    target: np.ndarray,
+    moved: np.ndarray,
+    sigma2: float,
+    c: float,
+    *,
+    compiled: bool = True,
+    truncate_eps: float = 0.0,
+    single: bool = False,
+    order: np.ndarray | None = None,
+    target_order: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float, float]:
+    """E-step statistics and the sums the M-step needs, in one pass when compiled.
+
+    Parameters
+    ----------
+    target : (N, D) float64
+    moved : (M, D) float64
+    sigma2, c : float
+        Kernel variance and the outlier term of the denominator.
+    compiled : bool
+        Use the compiled kernel when it is built; else (or when absent) the NumPy twin.
+    truncate_eps : float
+        Compiled kernel only: with ``truncate_eps > 0`` the source is sorted along its
+        longest axis and each target point sums only the source points within
+        :func:`truncation_halfwidth` along it, so every posterior entry is exact to
+        ``truncate_eps`` absolute.
+    single : bool
+        Kernel values and exponentials in float32 (statistics still in float64).
+    order : (M,) int64 or None
+        Compiled kernel only: the sort permutation, kept by the caller between the
+        E-steps of one registration (an O(M) re-sort); None: a fresh one.
+    target_order : (N,) int64 or None
+        Compiled kernel only: the same for the target, kept between E-steps; with it
+        the truncation window slides along the sorted targets instead of a binary
+        search per target point.
+
+    Returns
+    -------
+    p1 : (M,) float64
+    pt1 : (N,) float64
+    px : (M, D) float64
+    log_den : float
+        ``sum_n log(den_n)``.
+    n_p : float
+        ``sum(p1)``.
+    xpx : float
+        ``sum_n Pt1_n |x_n|^2``.
+    """
+    n, d = target.shape
+    m = moved.shape[0]
+    if compiled and _cestep is not None:
+        p1 = np.empty(m)
         pt1 = np.empty(n)
-        px_t = np.zeros((d, m))
-        tgt = np.ascontiguousarray(target)
-        half = truncation_halfwidth(sigma2, c, truncate_eps)
-        if half > 0.0:
-            extent = moved.max(axis=0) - moved.min(axis=0)
-            axis = int(np.argmax(extent))
-            if half >= extent[axis]:
-                half = 0.0
-        if half > 0.0:
-            order = np.argsort(moved[:, axis], kind="stable")
-            moved_t = np.ascontiguousarray(moved[order].T)
-            log_den = _cestep.estep(
-                tgt, moved_t, n, m, d, float(sigma2), float(c), p1, pt1, px_t, axis, half
-            )
-            p1_out = np.empty(m)
-            p1_out[order] = p1
-            px = np.empty((m, d))
-            px[order] = px_t.T
-            return p1_out, pt1, px, float(log_den)
-        moved_t = np.ascontiguousarray(moved.T)
-        log_den = _cestep.estep(tgt, moved_t, n, m, d, float(sigma2), float(c), p1, pt1, px_t)
-        return p1, pt1, px_t.T.copy(), float(log_den)
-    return estep_numpy(target, moved, sigma2, c)
+        px = np.empty((m, d))
+        if order is None:
+            order = np.arange(m, dtype=np.int64)
+        args = [
+            np.ascontiguousarray(target, dtype=np.float64),
+            np.ascontiguousarray(moved, dtype=np.float64),
+            n,
+            m,
+            d,
+            float(sigma2),
+            float(c),
+            float(truncate_eps),
+            bool(single),
+            p1,
+            pt1,
+            px,
+            order,
+        ]
+        if target_order is not None:
+            args.append(target_order)
+        log_den, n_p, xpx = _cestep.estep(*args)
+        return p1, pt1, px, log_den, n_p, xpx
+    if single:
+        target, moved = target.astype(np.float32), moved.astype(np.float32)
+    p1, pt1, px, log_den = estep_numpy(target, moved, sigma2, c)
+    xx = np.einsum("ij,ij->i", target, target, dtype=np.float64)
+    return p1, pt1, px, log_den, float(p1.sum()), float(pt1 @ xx)
 
 
 def posterior_argmax(
