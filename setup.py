@@ -1,10 +1,11 @@
-"""Build the optional compiled CPD kernels (``posedrift.registration._cestep``).
+"""Build the optional compiled kernels (``posedrift.registration._cestep``,
+``posedrift.labelling._ckernels``).
 
-Metadata lives in ``pyproject.toml``; this file only declares the C extension (the
-fused E-step in float64 and float32, and the low-rank M-step). It uses the plain buffer
-protocol (no NumPy C API), so NumPy is not a build requirement. The extension is
-optional: when it cannot be compiled the install still succeeds and posedrift falls
-back to its NumPy twins.
+Metadata lives in ``pyproject.toml``; this file only declares the C extensions (CPD's
+fused E-step in float64 and float32 and its low-rank M-step; relabelling's Dijkstra and
+the forest's per-point descent). They use the plain buffer protocol (no NumPy C API), so
+NumPy is not a build requirement. Both are optional: when one cannot be compiled the
+install still succeeds and posedrift falls back to its NumPy twins.
 """
 
 from setuptools import Extension, setup
@@ -23,6 +24,14 @@ setup(
                 "-fno-trapping-math",
             ],
             optional=True,
-        )
+        ),
+        # Relabelling's Dijkstra and the forest's per-point descent. Plain -O3: the
+        # code relies on infinities, which -ffinite-math-only would break.
+        Extension(
+            "posedrift.labelling._ckernels",
+            sources=["src/posedrift/labelling/_ckernels.c"],
+            extra_compile_args=["-O3"],
+            optional=True,
+        ),
     ]
 )

@@ -390,3 +390,53 @@ def test_training_frames_are_seeded_and_show_a_person():
         assert 1.8 < np.median(x.depth[x.mask]) < 3.8
     with pytest.raises(ValueError, match="'weights'"):
         next(synthetic_training_frames(1, [motion], weights=[0.0], rng=0))
+
+
+def test_fast_descents_reach_the_same_leaves(toy_forest, monkeypatch):
+    """The compiled and the few-pixel (fused) descents equal the plain NumPy one."""
+    from posedrift.labelling import _forest
+    from posedrift.labelling._features import pixel_terms, probe_image
+
+    rng = np.random.default_rng(11)
+    frame = toy_frame(rng)
+    pixels = np.argwhere(frame.mask)
+    # Probes far off the image and pixels at its border too.
+    near_edge = np.array([[0, 0], [CAM.height - 1, CAM.width - 1], [0, CAM.width - 1]])
+    depth = frame.depth.copy()
+    depth[tuple(near_edge.T)] = 0.5
+    mask = frame.mask.copy()
+    mask[tuple(near_edge.T)] = True
+    chosen = np.vstack([pixels[rng.choice(len(pixels), 300, replace=False)], near_edge])
+    compiled = _forest._ckernels
+    for forest in (toy_forest, BodyPartForest.load_default()):
+        image = probe_image(depth, mask, forest.background)
+        for some in (chosen, pixels):
+            terms = pixel_terms(depth, some, CAM, forest.reference_focal)
+            monkeypatch.setattr(_forest, "_ckernels", None)
+            monkeypatch.setattr(_forest, "_FUSED_PAIRS", 0)
+            plain = forest._descend_frame(image, depth.shape, terms)
+            monkeypatch.undo()
+            np.testing.assert_array_equal(forest._descend_fused(image, depth.shape, terms), plain)
+            if compiled is not None:
+                got = forest._descend_compiled(image, depth.shape, terms)
+                np.testing.assert_array_equal(got, plain)
+        # predict_pixels gives predict's rows.
+        full = forest.predict(depth, mask, CAM)
+        rows = {tuple(p): i for i, p in enumerate(full.pixels)}
+        got = forest.predict_pixels(depth, chosen, CAM, mask=mask)
+        np.testing.assert_array_equal(got, full.probabilities[[rows[tuple(p)] for p in chosen]])
+    if compiled is not None:
+        forest = BodyPartForest.load_default()
+        bad_roots = np.array([forest.n_nodes], dtype=np.int32)
+        args = [np.zeros(3, np.float32)] * 4
+        with pytest.raises(ValueError, match="inconsistent buffers or roots"):
+            compiled.descend(
+                forest._table.view(np.int32),
+                image,
+                *args,
+                bad_roots,
+                3,
+                240,
+                320,
+                np.empty(3, np.int32),
+            )

@@ -130,3 +130,182 @@ def test_relabel_errors():
             ratios=np.ones(15),
             evidence=np.ones((4, 3)),
         )
+
+
+# --------------------------------------------------------------------------- speed rewrites
+# The graph, the distances and the relabelling were rewritten for speed; these references
+# are the straightforward versions they replaced, and the fast ones must agree bit for bit.
+
+
+def _reference_graph(points, *, k=6, max_edge_factor=2.2, max_edge=None, depth_step=0.06):
+    from scipy import sparse
+    from scipy.spatial import cKDTree
+
+    n = len(points)
+    kk = min(k + 1, n)
+    dist, idx = cKDTree(points).query(points, k=kk)
+    dist, idx = dist[:, 1:], idx[:, 1:]
+    spacing = float(np.median(dist[:, 0]))
+    limit = max_edge if max_edge is not None else max_edge_factor * max(spacing, 1e-6)
+    rows = np.repeat(np.arange(n), kk - 1)
+    cols, lengths = idx.ravel(), dist.ravel()
+    keep = (lengths <= limit) & (cols < n)
+    if depth_step is not None:
+        diff = points[np.minimum(cols, n - 1)] - points[rows]
+        dz = np.abs(diff[:, 2])
+        keep &= ~((dz > depth_step) & (dz > np.hypot(diff[:, 0], diff[:, 1])))
+    rows, cols, lengths = rows[keep], cols[keep], lengths[keep]
+    lo, hi = np.minimum(rows, cols), np.maximum(rows, cols)
+    _, first = np.unique(lo * n + hi, return_index=True)
+    lo, hi, lengths = lo[first], hi[first], np.maximum(lengths[first], 1e-9)
+    matrix = sparse.coo_matrix(
+        (np.concatenate([lengths, lengths]), (np.concatenate([lo, hi]), np.concatenate([hi, lo]))),
+        shape=(n, n),
+    ).tocsr()
+    return lo, hi, lengths, spacing, matrix
+
+
+def _reference_distances(graph, points, anchors, labels=None):
+    """One undirected scipy Dijkstra per anchor, then the minimum per part."""
+    from scipy.sparse.csgraph import dijkstra
+
+    anchors = np.asarray(anchors, dtype=float)
+    if anchors.ndim == 2:
+        anchors = anchors[:, None, :]
+    n_parts = anchors.shape[0]
+    out = np.full((n_parts, len(points)), np.inf)
+    for j in range(n_parts):
+        for a in anchors[j]:
+            if not np.isfinite(a).all():
+                continue
+            d2 = ((a[None, :] - points) ** 2).sum(-1)
+            if labels is not None and (labels == j).any():
+                d2 = np.where(labels == j, d2, np.inf)
+            s = int(np.argmin(d2))
+            geo = dijkstra(graph.matrix, directed=False, indices=s) + np.sqrt(d2[s])
+            out[j] = np.minimum(out[j], geo)
+    return out
+
+
+def _reference_relabel(points, labels, anchors, *, height, ratios, alpha, evidence, graph, keep):
+    geo = _reference_distances(graph, points, anchors, labels).T
+    n_parts = len(ratios)
+    with np.errstate(over="ignore", invalid="ignore"):
+        z = np.clip(alpha * (geo - ratios[None, :] * height), -50.0, 50.0)
+        z = np.where(np.isfinite(geo), z, 50.0)
+        likelihood = 1.0 / (1.0 + np.exp(z))
+    if evidence is None:
+        evidence = np.zeros((len(points), n_parts))
+        known = (labels >= 0) & (labels < n_parts)
+        evidence[np.nonzero(known)[0], labels[known]] = 1.0
+    known = (labels >= 0) & (labels < n_parts)
+    fill = (evidence.sum(axis=1) <= 1e-6) & known
+    evidence = evidence.copy()
+    evidence[fill] = 0.0
+    evidence[np.nonzero(fill)[0], labels[fill]] = 1.0
+    total = evidence.sum(axis=1, keepdims=True)
+    norm = np.where(total > 1e-6, evidence / np.where(total > 1e-6, total, 1.0), 1.0 / n_parts)
+    score = (norm + 0.05) * likelihood
+    new = np.argmax(score, axis=1) if not keep else np.argmax(norm, axis=1)
+    if keep:
+        rows = np.arange(len(new))
+        bad = (likelihood[rows, new] < 0.5) & np.isfinite(geo[rows, new])
+        new[bad] = np.argmax(score[bad], axis=1)
+    stuck = score.max(axis=1) < 1e-6
+    new[stuck] = np.where(labels[stuck] >= 0, labels[stuck], np.argmax(norm[stuck], axis=1))
+    return new
+
+
+def _clouds():
+    """Point sets: a body, random blobs (several components), a tiny set, a depth step."""
+    rng = np.random.default_rng(7)
+    joints = t_pose_joints(1.7)
+    from posedrift.points import downsample
+
+    yield downsample(sample_humanoid(joints, 5000, rng=1, front_facing=True), 400)
+    yield np.vstack([rng.normal(c, 0.05, size=(60, 3)) for c in ((0, 0, 2), (1, 0, 2), (0, 1, 3))])
+    yield rng.uniform(size=(5, 3))
+    s = np.arange(40) * 0.02
+    yield np.vstack(
+        [np.column_stack([s, np.zeros(40), np.full(40, 2.0)]), np.column_stack([s, s, 1.9 + s])]
+    )
+
+
+@pytest.mark.parametrize("options", [{}, {"k": 3, "max_edge": 0.05}, {"depth_step": None}])
+def test_graph_equals_the_reference(options):
+    for pts in _clouds():
+        graph = geodesic_graph(pts, **options)
+        lo, hi, lengths, spacing, matrix = _reference_graph(pts, **options)
+        assert np.array_equal(graph.rows, lo) and np.array_equal(graph.cols, hi)
+        assert np.array_equal(graph.lengths, lengths) and graph.spacing == spacing
+        assert np.array_equal(graph.matrix.indptr, matrix.indptr)
+        assert np.array_equal(graph.matrix.indices, matrix.indices)
+        assert np.array_equal(graph.matrix.data, matrix.data)
+
+
+def _anchor_sets(pts, rng):
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    one = rng.uniform(lo, hi, size=(15, 3))
+    many = rng.uniform(lo, hi, size=(15, 3, 3))
+    many[4] = np.nan  # a part without anchors
+    many[7, 1] = np.nan  # one anchor missing
+    return one, many
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_distances_and_relabel_equal_the_reference(compiled, monkeypatch):
+    from posedrift.labelling import _relabel
+
+    if not compiled:
+        monkeypatch.setattr(_relabel, "_ckernels", None)
+    rng = np.random.default_rng(3)
+    for pts in _clouds():
+        graph = geodesic_graph(pts)
+        labels = rng.integers(-1, 15, size=len(pts))
+        for anchors in _anchor_sets(pts, rng):
+            for lab in (None, labels):
+                got = geodesic_distances(graph, pts, anchors, lab)
+                assert np.array_equal(got, _reference_distances(graph, pts, anchors, lab))
+            ratios = rng.uniform(0.05, 0.4, size=15)
+            evidence = rng.random((len(pts), 15)) ** 4
+            evidence[: len(pts) // 10] = 0.0  # rows without evidence
+            for alpha in (5.0, 60.0, 400.0):
+                for keep in (True, False):
+                    for ev in (None, evidence):
+                        kw = dict(height=1.7, ratios=ratios, alpha=alpha, graph=graph)
+                        got = relabel(pts, labels, anchors, evidence=ev, keep_plausible=keep, **kw)
+                        ref = _reference_relabel(pts, labels, anchors, evidence=ev, keep=keep, **kw)
+                        assert np.array_equal(got, ref)
+
+
+def test_compiled_dijkstra_matches_scipy_and_honours_limits():
+    from scipy.sparse.csgraph import dijkstra
+
+    from posedrift.labelling import _relabel
+
+    if _relabel._ckernels is None:
+        pytest.skip("the compiled kernels are not built (no C compiler at install)")
+    rng = np.random.default_rng(5)
+    for pts in _clouds():
+        matrix = geodesic_graph(pts).matrix
+        sources = rng.integers(0, len(pts), size=7)
+        exact = dijkstra(matrix, directed=True, indices=sources)
+        assert np.array_equal(_relabel._dijkstra(matrix, sources), exact)
+        limits = rng.uniform(0.0, 0.5, size=7)
+        got = _relabel._dijkstra(matrix, sources, limits)
+        within = exact <= limits[:, None]
+        assert np.array_equal(got[within], exact[within])
+        beyond = ~within & np.isfinite(exact)
+        assert (got[beyond] > limits[:, None].repeat(len(pts), 1)[beyond]).all()
+        assert (got[beyond] >= exact[beyond]).all()  # the length of some path
+        assert np.array_equal(np.isinf(got), np.isinf(exact))
+    with pytest.raises(ValueError, match="invalid graph"):
+        _relabel._ckernels.dijkstra(
+            matrix.indptr,
+            matrix.indices,
+            matrix.data,
+            matrix.shape[0],
+            np.array([10**6]),
+            np.array([np.inf]),
+            np.empty(matrix.shape[0]),
+        )

@@ -155,3 +155,182 @@ def test_downsample_small_input_and_errors():
         downsample(pts, 0)
     with pytest.raises(ValueError, match="'points' argument of downsample"):
         downsample(np.zeros((5, 2)), 3)
+
+
+# --------------------------------------------------------------------------- speed rewrites
+# Segmentation and downsampling were rewritten for speed; these references are the plain
+# versions they replaced (scipy.ndimage morphology, full back-projection before RANSAC,
+# np.unique voxels), and the fast ones must agree bit for bit.
+
+
+def _reference_floor(points, *, threshold=0.03, rng=0):
+    up, iterations, min_inliers, min_extent = np.array([0, -1.0, 0]), 60, 200, 1.0
+    cos_tilt = np.cos(np.radians(35.0))
+    if len(points) < max(3, min_inliers):
+        return None
+    gen = np.random.default_rng(rng)
+    sample = points if len(points) <= 3000 else points[gen.choice(len(points), 3000, replace=False)]
+    scale = len(points) / len(sample)
+    q = max(3, len(sample) // 4)
+    low = np.argpartition(sample @ up, q - 1)[:q]
+    if np.ptp(sample[low], axis=0).max() < min_extent:
+        return None
+    tri = low[gen.integers(0, len(low), size=(iterations, 3))]
+    a, b, c = sample[tri[:, 0]], sample[tri[:, 1]], sample[tri[:, 2]]
+    normals = np.cross(b - a, c - a)
+    norms = np.linalg.norm(normals, axis=1)
+    ok = norms > 1e-9
+    normals[ok] /= norms[ok, None]
+    normals[normals @ up < 0] *= -1
+    ok &= normals @ up > cos_tilt
+    if not ok.any():
+        return None
+    normals, a = normals[ok], a[ok]
+    offsets = -np.einsum("ij,ij->i", normals, a)
+    dist = np.abs(sample @ normals.T + offsets)
+    counts = (dist < threshold).sum(axis=0)
+    best = int(np.argmax(counts))
+    if counts[best] * scale < min_inliers:
+        return None
+    inl = sample[dist[:, best] < threshold]
+    centre = inl.mean(axis=0)
+    normal = np.linalg.svd(inl - centre, full_matrices=False)[2][-1]
+    normal = -normal if normal @ up < 0 else normal
+    if normal @ up < cos_tilt:
+        normal, centre = normals[best], a[best]
+    if np.ptp(inl - (inl @ normal)[:, None] * normal, axis=0).max() < min_extent:
+        return None
+    if np.mean(points @ normal - normal @ centre < -2 * threshold) > 0.05:
+        return None
+    return normal, float(-normal @ centre)
+
+
+def _reference_segment(frame, *, background=None):
+    """segment_person with its default options, as it was written before the speed-up."""
+    from scipy import ndimage
+
+    from posedrift.points._segment import _components
+
+    depth = np.where(np.isfinite(frame.depth), frame.depth, 0.0).astype(np.float32)
+    mask = (depth >= 0.4) & (depth <= 6.0)
+    if background is not None:
+        mask &= background.foreground(depth)
+    if not mask.any():
+        return mask
+    if mask.sum() >= 150:
+        points, pixels = backproject(depth, frame.intrinsics, mask)
+        plane = _reference_floor(points)
+        if plane is not None:
+            on_floor = points @ plane[0] + plane[1] < 0.03
+            mask[pixels[on_floor, 0], pixels[on_floor, 1]] = False
+    rows, cols = np.nonzero(mask.any(axis=1))[0], np.nonzero(mask.any(axis=0))[0]
+    r0, r1 = max(rows[0] - 3, 0), min(rows[-1] + 4, mask.shape[0])
+    c0, c1 = max(cols[0] - 3, 0), min(cols[-1] + 4, mask.shape[1])
+    m, d, k = mask[r0:r1, c0:c1], depth[r0:r1, c0:c1], frame.intrinsics
+    out = np.zeros_like(mask)
+    labels, n = _components(m, d, 0.15)
+    counts = np.bincount(labels.ravel(), minlength=n + 1)
+    counts[0] = 0
+    chosen = 0
+    for lab in np.argsort(counts)[::-1][: min(n, 8)]:
+        if counts[lab] < 150:
+            break
+        comp = labels == lab
+        rr, cc = np.nonzero(comp.any(axis=1))[0], np.nonzero(comp.any(axis=0))[0]
+        z = float(np.median(d[comp]))
+        tall, wide = (rr[-1] - rr[0] + 1) * z / k.fy, (cc[-1] - cc[0] + 1) * z / k.fx
+        if tall < 0.4 or tall > 2.6 or wide > 2.6:
+            continue
+        chosen = lab
+        break
+    if chosen == 0:
+        return out
+    person = labels == chosen
+    z_person = float(np.median(d[person]))
+    near = ndimage.binary_dilation(person, iterations=2)
+    for lab in np.unique(labels[near & (labels > 0) & ~person]):
+        if abs(float(np.median(d[labels == lab])) - z_person) < 0.6:
+            person |= labels == lab
+    ring = ndimage.binary_dilation(person) & m & (labels == 0)
+    if ring.any():
+        near_depth = ndimage.grey_dilation(np.where(person, d, 0.0), size=3)
+        person |= ring & (np.abs(d - near_depth) < 0.15)
+    out[r0:r1, c0:c1] = person
+    return out
+
+
+@pytest.fixture(scope="module")
+def varied_frames():
+    """Frames with and without floor, wall and sensor noise, and a splatted scene."""
+    from posedrift.synthetic import build_sequence, procedural_motion
+
+    motion = procedural_motion()
+    frames = list(build_sequence(motion, n_frames=4, rng=0).frames)
+    frames += build_sequence(motion, n_frames=6, background=True, noise=True, rng=1).frames
+    person, cam = _person_depth()
+    frames.append(DepthFrame(_scene(person, cam), K))
+    noisy = frames[-2].depth.copy()
+    noisy[::7, ::5] = np.nan
+    frames.append(DepthFrame(noisy, K))
+    return frames
+
+
+def test_segment_equals_the_reference(varied_frames):
+    floors = 0
+    for frame in varied_frames:
+        assert np.array_equal(segment_person(frame), _reference_segment(frame))
+        pts, _ = backproject(frame.depth, K, frame.depth > 0.4)
+        got, ref = fit_floor_plane(pts, rng=0), _reference_floor(pts)
+        assert (got is None) == (ref is None)
+        if ref is not None:
+            floors += 1
+            assert np.array_equal(got[0], ref[0]) and got[1] == ref[1]
+    assert floors >= 3  # the room frames have a floor
+    model = BackgroundModel().fit([f.depth for f in varied_frames[4:10]])
+    for frame in varied_frames[4:10]:
+        assert np.array_equal(
+            segment_person(frame, background=model), _reference_segment(frame, background=model)
+        )
+
+
+def test_morphology_kernels_equal_scipy():
+    from scipy import ndimage
+
+    from posedrift.points._segment import _dilate, _max3x3, _nonzero
+
+    rng = np.random.default_rng(0)
+    for shape in ((1, 1), (1, 7), (6, 1), (23, 31)):
+        mask = rng.random(shape) < 0.2
+        for it in (1, 2, 3):
+            assert np.array_equal(_dilate(mask, it), ndimage.binary_dilation(mask, iterations=it))
+        image = rng.random(shape).astype(np.float32) * mask
+        assert np.array_equal(_max3x3(image), ndimage.grey_dilation(image, size=3))
+        for m in (mask, np.zeros(shape, bool)):
+            got, ref = _nonzero(m), np.nonzero(m)
+            assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1])
+
+
+def _reference_voxels(points, size):
+    keys = np.floor((points - points.min(axis=0)) / size).astype(np.int64)
+    dims = keys.max(axis=0) + 1
+    flat = (keys[:, 0] * dims[1] + keys[:, 1]) * dims[2] + keys[:, 2]
+    _, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
+    cent = np.column_stack(
+        [
+            np.bincount(inverse, weights=points[:, d], minlength=len(counts)) / counts
+            for d in range(3)
+        ]
+    )
+    return cent, inverse
+
+
+def test_voxel_centroids_equal_the_reference():
+    from posedrift.points._downsample import _voxel_centroids
+
+    rng = np.random.default_rng(2)
+    depth, _ = _person_depth()
+    clouds = [backproject(depth, K)[0], rng.uniform(size=(3000, 3)) * 50, rng.normal(size=(1, 3))]
+    for pts in clouds:
+        for size in (0.005, 0.03, 0.2):  # the sparse grids take the np.unique path
+            got, ref = _voxel_centroids(pts, size), _reference_voxels(pts, size)
+            assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1])

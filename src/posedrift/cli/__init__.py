@@ -13,6 +13,7 @@ _COMMAND_MODULES: tuple[str, ...] = (
     "_synth",
     "_bench_render",
     "_bench_cpd",
+    "_bench_track",
     "_view",
     "_eval",
     "_track",

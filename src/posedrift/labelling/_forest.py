@@ -31,6 +31,11 @@ from posedrift.labelling._features import (
 )
 from posedrift.skeleton import PART_NAMES
 
+try:  # the compiled kernels are optional: built by ``pip install -e .`` when a compiler exists
+    from posedrift.labelling import _ckernels  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the build
+    _ckernels = None
+
 FORMAT_NAME = "posedrift-body-part-forest"
 FORMAT_VERSION = 1
 MAX_DEPTH = 64
@@ -39,6 +44,7 @@ MAX_OFFSET = 5000.0
 """Largest offset (pixel x metres) a model file may hold."""
 
 _DEFAULT_MODEL = "forest_default.npz"
+_FUSED_PAIRS = 6000  # (tree, pixel) pairs up to which the fused descent is faster
 _LOADED_DEFAULT: list = []  # the default model, once loaded
 _KEYS = (
     "format",
@@ -553,6 +559,10 @@ class BodyPartForest:
         shrink: each step is a fixed handful of whole-array operations.
         Returns ``(T, N)`` leaf node ids.
         """
+        if _ckernels is not None:
+            return self._descend_compiled(image, shape, terms)
+        if len(terms[0]) * self.n_trees <= _FUSED_PAIRS:
+            return self._descend_fused(image, shape, terms)
         n = len(terms[0])
         n_trees = self.n_trees
         tiled = tuple(np.tile(t, n_trees) for t in terms)
@@ -564,6 +574,64 @@ class BodyPartForest:
             values = record.view(np.float32)
             feature = probe(image, shape, *tiled, values[:, 0], values[:, 1])
             feature -= probe(image, shape, *tiled, values[:, 2], values[:, 3])
+            node = np.where(feature <= values[:, 4], record[:, 5], record[:, 6])
+        return node.reshape(n_trees, n)
+
+    def _descend_compiled(
+        self, image: np.ndarray, shape: tuple[int, int], terms: tuple[np.ndarray, ...]
+    ) -> np.ndarray:
+        """:meth:`_descend_frame` by the compiled kernel (``_ckernels.c``): the same leaves."""
+        out = np.empty((self.n_trees, len(terms[0])), dtype=np.int32)
+        _ckernels.descend(
+            self._table.view(np.int32),
+            np.ascontiguousarray(image, dtype=np.float32),
+            *(np.ascontiguousarray(t, dtype=np.float32) for t in terms),
+            np.ascontiguousarray(self.roots, dtype=np.int32),
+            self._depth,
+            shape[0],
+            shape[1],
+            out,
+        )
+        return out
+
+    def _descend_fused(
+        self, image: np.ndarray, shape: tuple[int, int], terms: tuple[np.ndarray, ...]
+    ) -> np.ndarray:
+        """:meth:`_descend_frame` for few pairs (the tracker's per-point evidence).
+
+        Both probes of a pair are computed together, as rows ``(u_row, v_row, u_col,
+        v_col)`` of ``(4, pairs)`` arrays, with the same float32 operations in the same
+        order as :func:`posedrift.labelling._features.probe` (so the same leaves): half
+        the array operations per level, which dominate at a few hundred pixels.
+        """
+        n = len(terms[0])
+        n_trees = self.n_trees
+        height, width = shape
+        rows, cols, row_scale, col_scale = (np.tile(t, n_trees) for t in terms)
+        # Both probes of a pair at once, as rows (u_row, v_row, u_col, v_col) of (4, pairs)
+        # arrays: the same float32 operations, in the same order, as features.probe.
+        scale = np.stack([row_scale, row_scale, col_scale, col_scale])
+        base = np.stack([rows, rows, cols, cols])
+        lower = np.zeros((4, 1), dtype=np.float32)
+        upper = np.array([[height + 1], [height + 1], [width + 1], [width + 1]], np.float32)
+        stride = np.int32(width + 2)
+        at = np.empty_like(scale)
+        index = np.empty(scale.shape, dtype=np.int32)
+        node = np.repeat(self.roots.astype(np.intp), n)
+        table = self._table
+        for _ in range(self._depth):
+            # One 32-byte row gather per pair; then whole-array operations.
+            record = np.take(table, node, axis=0).view(np.int32)
+            values = record.view(np.float32)
+            np.multiply(values[:, [0, 2, 1, 3]].T, scale, out=at)
+            at += base
+            np.maximum(at, lower, out=at)
+            np.minimum(at, upper, out=at)
+            index[...] = at  # truncation, as astype(np.int32)
+            flat = index[:2] * stride
+            flat += index[2:]
+            depth = np.take(image, flat)
+            feature = depth[0] - depth[1]
             node = np.where(feature <= values[:, 4], record[:, 5], record[:, 6])
         return node.reshape(n_trees, n)
 

@@ -21,6 +21,14 @@ from scipy import sparse
 
 from posedrift._validation import check_points, check_scalar
 
+try:  # the compiled kernels are optional: built by ``pip install -e .`` when a compiler exists
+    from posedrift.labelling import _ckernels  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the build
+    _ckernels = None
+
+
+_Z_CLIP = 50.0  # the sigmoid's exponent is clipped to [-50, 50] (relabel)
+
 
 @dataclass(frozen=True)
 class GeodesicGraph:
@@ -83,26 +91,46 @@ def geodesic_graph(
     dist, idx = dist[:, 1:], idx[:, 1:]
     spacing = float(np.median(dist[:, 0]))
     limit = max_edge if max_edge is not None else max_edge_factor * max(spacing, 1e-6)
-    rows = np.repeat(np.arange(n), kk - 1)
     cols = idx.ravel()
     lengths = dist.ravel()
-    keep = (lengths <= limit) & (cols < n)
-    if depth_step is not None:
-        diff = points[cols] - points[rows]
-        dz = np.abs(diff[:, 2])
-        dxy = np.hypot(diff[:, 0], diff[:, 1])
-        keep &= ~((dz > depth_step) & (dz > dxy))
-    rows, cols, lengths = rows[keep], cols[keep], lengths[keep]
+    keep = lengths <= limit  # a missing neighbour (k >= n) has an infinite distance
+    keep &= cols < n
+    edge = np.flatnonzero(keep)
+    rows = edge // (kk - 1)
+    cols, lengths = cols[edge], lengths[edge]
+    if depth_step is not None and len(edge):
+        dz = np.abs(points[cols, 2] - points[rows, 2])
+        steep = np.flatnonzero(dz > depth_step)
+        if len(steep):
+            a, b = points[rows[steep]], points[cols[steep]]
+            dxy = np.hypot(b[:, 0] - a[:, 0], b[:, 1] - a[:, 1])
+            cut = np.ones(len(rows), dtype=bool)
+            cut[steep[dz[steep] > dxy]] = False
+            rows, cols, lengths = rows[cut], cols[cut], lengths[cut]
     lo, hi = np.minimum(rows, cols), np.maximum(rows, cols)
     key = lo * n + hi
     _, first = np.unique(key, return_index=True)
     lo, hi, lengths = lo[first], hi[first], lengths[first]
     lengths = np.maximum(lengths, 1e-9)
-    matrix = sparse.coo_matrix(
-        (np.concatenate([lengths, lengths]), (np.concatenate([lo, hi]), np.concatenate([hi, lo]))),
-        shape=(n, n),
-    ).tocsr()
+    matrix = _symmetric_csr(lo, hi, lengths, n)
     return GeodesicGraph(matrix=matrix, rows=lo, cols=hi, lengths=lengths, spacing=spacing)
+
+
+def _symmetric_csr(lo: np.ndarray, hi: np.ndarray, lengths: np.ndarray, n: int):
+    """The canonical CSR matrix (sorted indices) with ``lengths`` at ``(lo, hi)`` and ``(hi, lo)``.
+
+    Equal to ``coo_matrix(...).tocsr()`` of the same entries (no duplicates), built
+    without the generic conversion.
+    """
+    r = np.concatenate([lo, hi])
+    c = np.concatenate([hi, lo])
+    order = np.argsort(r * n + c, kind="stable")
+    indptr = np.zeros(n + 1, dtype=np.int32)
+    np.cumsum(np.bincount(r, minlength=n), out=indptr[1:])
+    return sparse.csr_matrix(
+        (np.concatenate([lengths, lengths])[order], c[order].astype(np.int32), indptr),
+        shape=(n, n),
+    )
 
 
 def geodesic_distances(
@@ -127,30 +155,103 @@ def geodesic_distances(
         The Euclidean gap from an anchor to its source vertex is included.
         Unreachable points and parts without anchors give ``inf``.
     """
-    from scipy.sparse.csgraph import dijkstra
+    return _part_distances(graph, points, anchors, labels)
 
+
+def _part_distances(
+    graph: GeodesicGraph,
+    points: np.ndarray,
+    anchors: np.ndarray,
+    labels: np.ndarray | None,
+    reach: np.ndarray | None = None,
+) -> np.ndarray:
+    """:func:`geodesic_distances`, optionally exact only up to each part's ``reach``.
+
+    With ``reach`` (J,) metres, a part's distance is exact where it is at most
+    ``reach[j]``; elsewhere it is the length of some path, above ``reach[j]`` (finite
+    exactly where the point is reachable), which lets the searches stop early.
+    """
     anchors = np.asarray(anchors, dtype=float)
     if anchors.ndim == 2:
         anchors = anchors[:, None, :]
     n_parts, k = anchors.shape[:2]
-    out = np.full((n_parts, len(points)), np.inf)
     flat = anchors.reshape(-1, 3)
     part_of = np.repeat(np.arange(n_parts), k)
-    valid = np.isfinite(flat).all(axis=1)
-    if not valid.any():
-        return out
-    flat, part_of = flat[valid], part_of[valid]
-    d2 = ((flat[:, None, :] - points[None, :, :]) ** 2).sum(-1)  # (A, N)
+    valid = np.flatnonzero(np.isfinite(flat).all(axis=1))
+    if len(valid) == 0:
+        return np.full((n_parts, len(points)), np.inf)
+    part_of = part_of[valid]
+    sources, gap = _anchor_sources(points, flat[valid], part_of, labels)
+    unique, inverse = np.unique(sources, return_inverse=True)
+    limits = None
+    if reach is not None:
+        # A source's search may stop beyond the largest reach of its anchors (less their
+        # gaps): a part's distance at most its reach comes from a path within that limit;
+        # beyond it every path, hence every value, is longer than the reach.
+        limits = np.full(len(unique), -np.inf)
+        np.fmax.at(limits, inverse, reach[part_of] - gap)
+        limits = limits + 1e-9 + 1e-12 * np.abs(limits)
+        limits[~(limits > -np.inf)] = np.inf  # a NaN reach: exact distances
+    geo = _dijkstra(graph.matrix, unique, limits)[inverse]
+    geo += gap[:, None]
+    # The smallest distance over each part's anchors.
+    per_anchor = np.full((n_parts * k, len(points)), np.inf)
+    per_anchor[valid] = geo
+    out = per_anchor.reshape(n_parts, k, -1).min(axis=1)
+    return out
+
+
+def _dijkstra(
+    matrix: sparse.csr_matrix, sources: np.ndarray, limits: np.ndarray | None = None
+) -> np.ndarray:
+    """Shortest-path lengths ``(S, N)`` from each source over a symmetric graph.
+
+    The compiled kernel where it is built, else ``scipy.sparse.csgraph.dijkstra`` (the
+    same doubles: see ``_ckernels.c``). ``limits`` (S,): a run's exact range; beyond
+    it a vertex may get the length of any path to it instead of the shortest (the
+    compiled kernel stops its search there). Unreachable vertices get ``inf``.
+    """
+    n = matrix.shape[0]
+    sources = np.ascontiguousarray(sources, dtype=np.int64)
+    if _ckernels is None:
+        from scipy.sparse.csgraph import dijkstra
+
+        # The graph is symmetric: the directed search over its stored edges is the
+        # undirected one. Exact everywhere (limits are only a licence to stop early).
+        return dijkstra(matrix, directed=True, indices=sources)
+    if limits is None:
+        limits = np.full(len(sources), np.inf)
+    out = np.empty((len(sources), n))
+    _ckernels.dijkstra(
+        np.ascontiguousarray(matrix.indptr, dtype=np.int32),
+        np.ascontiguousarray(matrix.indices, dtype=np.int32),
+        np.ascontiguousarray(matrix.data, dtype=np.float64),
+        n,
+        sources,
+        np.ascontiguousarray(limits, dtype=np.float64),
+        out,
+    )
+    return out
+
+
+def _anchor_sources(
+    points: np.ndarray, anchors: np.ndarray, part_of: np.ndarray, labels: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each anchor's source vertex and its Euclidean gap to it (see geodesic_distances)."""
+    # Squared distances (A, N), summed over x, y, z in that order.
+    d2 = np.subtract.outer(anchors[:, 0], points[:, 0])
+    d2 *= d2
+    for axis in (1, 2):
+        step = np.subtract.outer(anchors[:, axis], points[:, axis])
+        step *= step
+        d2 += step
     if labels is not None:
         own = labels[None, :] == part_of[:, None]
         has = own.any(axis=1)
-        d2 = np.where(own | ~has[:, None], d2, np.inf)
+        d2[~(own | ~has[:, None])] = np.inf
     sources = np.argmin(d2, axis=1)
     gap = np.sqrt(d2[np.arange(len(sources)), sources])
-    geo = dijkstra(graph.matrix, directed=False, indices=sources) + gap[:, None]
-    for j in np.unique(part_of):
-        out[j] = geo[part_of == j].min(axis=0)
-    return out
+    return sources, gap
 
 
 def relabel(
@@ -241,10 +342,13 @@ def relabel(
         return (out, np.ones((len(points), n_parts))) if return_likelihood else out
     if graph is None:
         graph = geodesic_graph(points, k=k)
-    geo = geodesic_distances(graph, points, part_joints, labels).T  # (N, J)
+    # Beyond D_j H + _Z_CLIP / alpha the clipped sigmoid is flat: the distances need not be
+    # exact there (the searches stop early), only finite where the point is reachable.
+    reach = ratios * height + _Z_CLIP / alpha
+    geo = _part_distances(graph, points, part_joints, labels, reach).T  # (N, J)
     with np.errstate(over="ignore", invalid="ignore"):
-        z = np.clip(alpha * (geo - ratios[None, :] * height), -50.0, 50.0)
-        z = np.where(np.isfinite(geo), z, 50.0)
+        z = np.clip(alpha * (geo - ratios[None, :] * height), -_Z_CLIP, _Z_CLIP)
+        z = np.where(np.isfinite(geo), z, _Z_CLIP)
         likelihood = 1.0 / (1.0 + np.exp(z))
     if evidence is None:
         evidence = np.zeros((len(points), n_parts))

@@ -82,18 +82,45 @@ def part_modes(
             np.bincount(lab, weights=w * p[:, d], minlength=n_parts)[have] / counts[have]
         )
     inv2h2 = 0.5 / bandwidth**2
+    # Only the parts with points, with column-major state: coordinates (3, M) and modes
+    # (3, parts); one bincount per iteration over [kernel, kernel * x, kernel * y,
+    # kernel * z] (each bin sums its points in input order, as separate bincounts would).
+    live = np.flatnonzero(have)
+    n_live = len(live)
+    slot = np.zeros(n_parts, dtype=np.intp)
+    slot[live] = np.arange(n_live)
+    lab = slot[lab]
+    coords = np.ascontiguousarray(p.T)
+    centre = np.ascontiguousarray(modes[live].T)
+    groups = (lab[None, :] + n_live * np.arange(4)[:, None]).ravel()
+    weighted = np.empty((4, len(lab)))
+    kernel = weighted[0]
+    diff = np.empty_like(coords)
     for _ in range(max_iter):
-        r2 = ((p - modes[lab]) ** 2).sum(axis=1)
-        k = w * np.exp(-r2 * inv2h2)
-        den = np.bincount(lab, weights=k, minlength=n_parts)
-        new = modes.copy()
-        move = have & (den > 1e-12)
-        for d in range(3):
-            new[move, d] = (
-                np.bincount(lab, weights=k * p[:, d], minlength=n_parts)[move] / den[move]
-            )
-        shift = np.nanmax(np.abs(new - modes)) if move.any() else 0.0
-        modes = new
+        np.subtract(coords, np.take(centre, lab, axis=1), out=diff)
+        diff *= diff
+        r2 = diff[0] + diff[1]
+        r2 += diff[2]
+        np.negative(r2, out=r2)
+        r2 *= inv2h2
+        np.exp(r2, out=kernel)
+        if weights is not None:
+            np.multiply(w, kernel, out=kernel)
+        np.multiply(coords, kernel, out=weighted[1:])
+        sums = np.bincount(groups, weights=weighted.ravel(), minlength=4 * n_live)
+        sums = sums.reshape(4, n_live)
+        den = sums[0]
+        move = den > 1e-12
+        if move.all():
+            new = sums[1:] / den
+        elif move.any():
+            new = centre.copy()
+            new[:, move] = sums[1:, move] / den[move]
+        else:
+            break
+        shift = float(np.abs(new - centre).max())
+        centre = new
         if shift < tol:
             break
+    modes[live] = centre.T
     return (modes, counts) if return_counts else modes

@@ -1,0 +1,321 @@
+/* Compiled kernels of posedrift.labelling: geodesic Dijkstra and the forest's descent.
+ *
+ * dijkstra(indptr, indices, data, n, sources, limits, out) -> None
+ *   Shortest paths from several sources over a CSR graph (Algorithm 2's geodesics).
+ *   indptr  : (n + 1,) int32 buffer, CSR row pointers
+ *   indices : (nnz,) int32 buffer, CSR column indices (the edges u -> v)
+ *   data    : (nnz,) float64 buffer, non-negative edge lengths
+ *   sources : (S,) int64 buffer, the source vertex of each run
+ *   limits  : (S,) float64 buffer, a run's exact range: vertices further away get some
+ *             finite distance above the limit (the length of a path to them), unreachable
+ *             ones +inf; pass +inf for exact distances everywhere
+ *   out     : (S, n) float64 C-contiguous buffer, written
+ *   Every distance within the limit is the same double as scipy.sparse.csgraph.dijkstra
+ *   (directed=True) gives: a settled vertex's distance is the smallest fl(d(u) + w(u, v))
+ *   over its settled neighbours u, whatever the heap. Binary heap with lazy deletion; the
+ *   vertices beyond the limit are then only marked reachable, breadth first.
+ *
+ * descend(table, image, rows, cols, row_scale, col_scale, roots, levels, height, width, out)
+ *   The body-part forest's descent (BodyPartForest._descend_frame), every (tree, pixel)
+ *   pair one level per sweep, so that the pairs' table reads overlap.
+ *   table   : (M, 8) 32-bit records: float32 u_row, u_col, v_row, v_col, threshold, int32
+ *             left, right, spare (a leaf: zero offsets, +inf threshold, itself twice)
+ *   image   : ((H + 2) * (W + 2),) float32, the probe image (features.probe_image)
+ *   rows, cols, row_scale, col_scale : (N,) float32, from features.pixel_terms
+ *   roots   : (T,) int32; levels: sweeps (the deepest tree's depth); height, width: H, W
+ *   out     : (T, N) int32, written: the node reached by each (tree, pixel)
+ *   The same float32 operations in the same order as features.probe (no contraction into
+ *   fused multiply-adds), so the same leaves as the NumPy descent.
+ *
+ * The twins are scipy's dijkstra and the NumPy descent; tests/test_relabel.py and
+ * tests/test_forest.py compare them. Plain buffer protocol (no NumPy C API). Build with
+ * plain -O2/-O3: it relies on IEEE infinities and float32 rounding, so never with
+ * -ffast-math or -ffinite-math-only.
+ */
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC optimize("fp-contract=off")
+#endif
+#if defined(__clang__)
+#pragma STDC FP_CONTRACT OFF
+#endif
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+
+typedef struct {
+    double key;
+    int32_t node;
+} item;
+
+static inline void heap_push(item *heap, Py_ssize_t *size, double key, int32_t node) {
+    Py_ssize_t i = (*size)++;
+    while (i > 0) {
+        Py_ssize_t parent = (i - 1) >> 1;
+        if (heap[parent].key <= key) break;
+        heap[i] = heap[parent];
+        i = parent;
+    }
+    heap[i].key = key;
+    heap[i].node = node;
+}
+
+static inline item heap_pop(item *heap, Py_ssize_t *size) {
+    item top = heap[0];
+    item last = heap[--(*size)];
+    Py_ssize_t n = *size, i = 0;
+    for (;;) {
+        Py_ssize_t child = 2 * i + 1;
+        if (child >= n) break;
+        if (child + 1 < n && heap[child + 1].key < heap[child].key) child++;
+        if (heap[child].key >= last.key) break;
+        heap[i] = heap[child];
+        i = child;
+    }
+    if (n > 0) heap[i] = last;
+    return top;
+}
+
+static int get_buffer(PyObject *obj, Py_buffer *view, int writable, Py_ssize_t itemsize,
+                      Py_ssize_t count, const char *name) {
+    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | (writable ? PyBUF_WRITABLE : 0)) < 0)
+        return -1;
+    if (view->itemsize != itemsize || view->len < itemsize * count) {
+        PyErr_Format(PyExc_ValueError, "dijkstra: buffer '%s' has the wrong size or item size",
+                     name);
+        PyBuffer_Release(view);
+        return -1;
+    }
+    return 0;
+}
+
+static PyObject *dijkstra(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *o_indptr, *o_indices, *o_data, *o_sources, *o_limits, *o_out;
+    Py_ssize_t n;
+    if (!PyArg_ParseTuple(args, "OOOnOOO", &o_indptr, &o_indices, &o_data, &n, &o_sources,
+                          &o_limits, &o_out))
+        return NULL;
+    Py_buffer b_indptr, b_indices, b_data, b_sources, b_limits, b_out;
+    if (n < 0 || n > INT32_MAX) {
+        PyErr_SetString(PyExc_ValueError, "dijkstra: bad vertex count");
+        return NULL;
+    }
+    if (get_buffer(o_indptr, &b_indptr, 0, 4, n + 1, "indptr") < 0) return NULL;
+    const int32_t *indptr = (const int32_t *)b_indptr.buf;
+    Py_ssize_t nnz = indptr[n];
+    if (nnz < 0 || get_buffer(o_indices, &b_indices, 0, 4, nnz, "indices") < 0) {
+        if (nnz < 0) PyErr_SetString(PyExc_ValueError, "dijkstra: bad indptr");
+        PyBuffer_Release(&b_indptr);
+        return NULL;
+    }
+    if (get_buffer(o_data, &b_data, 0, 8, nnz, "data") < 0) {
+        PyBuffer_Release(&b_indptr);
+        PyBuffer_Release(&b_indices);
+        return NULL;
+    }
+    Py_ssize_t n_sources = 0;
+    if (PyObject_GetBuffer(o_sources, &b_sources, PyBUF_C_CONTIGUOUS) < 0) {
+        PyBuffer_Release(&b_indptr);
+        PyBuffer_Release(&b_indices);
+        PyBuffer_Release(&b_data);
+        return NULL;
+    }
+    n_sources = b_sources.len / 8;
+    if (b_sources.itemsize != 8 ||
+        get_buffer(o_limits, &b_limits, 0, 8, n_sources, "limits") < 0) {
+        if (b_sources.itemsize != 8)
+            PyErr_SetString(PyExc_ValueError, "dijkstra: 'sources' must be int64");
+        PyBuffer_Release(&b_indptr);
+        PyBuffer_Release(&b_indices);
+        PyBuffer_Release(&b_data);
+        PyBuffer_Release(&b_sources);
+        return NULL;
+    }
+    if (get_buffer(o_out, &b_out, 1, 8, n_sources * n, "out") < 0) {
+        PyBuffer_Release(&b_indptr);
+        PyBuffer_Release(&b_indices);
+        PyBuffer_Release(&b_data);
+        PyBuffer_Release(&b_sources);
+        PyBuffer_Release(&b_limits);
+        return NULL;
+    }
+    const int32_t *indices = (const int32_t *)b_indices.buf;
+    const double *data = (const double *)b_data.buf;
+    const int64_t *sources = (const int64_t *)b_sources.buf;
+    const double *limits = (const double *)b_limits.buf;
+    double *out = (double *)b_out.buf;
+    int ok = 1;
+    for (Py_ssize_t e = 0; e < nnz && ok; e++)
+        if (indices[e] < 0 || indices[e] >= n || !(data[e] >= 0.0)) ok = 0;
+    for (Py_ssize_t v = 0; v < n && ok; v++)
+        if (indptr[v] > indptr[v + 1] || indptr[v] < 0) ok = 0;
+    for (Py_ssize_t s = 0; s < n_sources && ok; s++)
+        if (sources[s] < 0 || sources[s] >= n) ok = 0;
+    item *heap = ok ? (item *)malloc(sizeof(item) * (size_t)(nnz + 1)) : NULL;
+    int32_t *queue = heap ? (int32_t *)malloc(sizeof(int32_t) * (size_t)(n + 1)) : NULL;
+    if (!ok || heap == NULL || queue == NULL) {
+        free(heap);
+        PyBuffer_Release(&b_indptr);
+        PyBuffer_Release(&b_indices);
+        PyBuffer_Release(&b_data);
+        PyBuffer_Release(&b_sources);
+        PyBuffer_Release(&b_limits);
+        PyBuffer_Release(&b_out);
+        if (!ok) {
+            PyErr_SetString(PyExc_ValueError,
+                            "dijkstra: invalid graph (indices, negative lengths) or sources");
+            return NULL;
+        }
+        return PyErr_NoMemory();
+    }
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t s = 0; s < n_sources; s++) {
+        double *dist = out + s * n;
+        const double limit = limits[s];
+        for (Py_ssize_t v = 0; v < n; v++) dist[v] = INFINITY;
+        Py_ssize_t size = 0, tail = 0;
+        dist[sources[s]] = 0.0;
+        heap_push(heap, &size, 0.0, (int32_t)sources[s]);
+        while (size > 0) {
+            item top = heap_pop(heap, &size);
+            if (top.key > dist[top.node]) continue; /* stale entry */
+            const double d = top.key;
+            for (int32_t e = indptr[top.node]; e < indptr[top.node + 1]; e++) {
+                const int32_t v = indices[e];
+                const double nd = d + data[e];
+                if (nd <= limit) {
+                    if (nd < dist[v]) {
+                        dist[v] = nd;
+                        heap_push(heap, &size, nd, v);
+                    }
+                } else if (dist[v] == INFINITY) {
+                    dist[v] = nd; /* beyond the limit: reachable, not exact */
+                    queue[tail++] = v;
+                }
+            }
+        }
+        /* Breadth first over the rest: any path length, all above the limit. */
+        for (Py_ssize_t head = 0; head < tail; head++) {
+            const int32_t u = queue[head];
+            if (!(dist[u] > limit)) continue; /* lowered within the limit since */
+            for (int32_t e = indptr[u]; e < indptr[u + 1]; e++) {
+                const int32_t v = indices[e];
+                if (dist[v] == INFINITY) {
+                    dist[v] = dist[u] + data[e];
+                    queue[tail++] = v;
+                }
+            }
+        }
+    }
+    Py_END_ALLOW_THREADS
+    free(heap);
+    free(queue);
+    PyBuffer_Release(&b_indptr);
+    PyBuffer_Release(&b_indices);
+    PyBuffer_Release(&b_data);
+    PyBuffer_Release(&b_sources);
+    PyBuffer_Release(&b_limits);
+    PyBuffer_Release(&b_out);
+    Py_RETURN_NONE;
+}
+
+static PyObject *descend(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *objs[8];
+    Py_ssize_t levels, height, width;
+    if (!PyArg_ParseTuple(args, "OOOOOOOnnnO", &objs[0], &objs[1], &objs[2], &objs[3],
+                          &objs[4], &objs[5], &objs[6], &levels, &height, &width, &objs[7]))
+        return NULL;
+    Py_buffer b[8];
+    int got = 0;
+    for (; got < 8; got++) {
+        int flags = PyBUF_C_CONTIGUOUS | (got == 7 ? PyBUF_WRITABLE : 0);
+        if (PyObject_GetBuffer(objs[got], &b[got], flags) < 0) break;
+        if (b[got].itemsize != 4) {
+            PyBuffer_Release(&b[got]);
+            PyErr_SetString(PyExc_ValueError, "descend: every buffer must hold 32-bit items");
+            break;
+        }
+    }
+    if (got < 8) {
+        for (int i = 0; i < got; i++) PyBuffer_Release(&b[i]);
+        return NULL;
+    }
+    const Py_ssize_t n_nodes = b[0].len / 32;
+    const Py_ssize_t n = b[2].len / 4;
+    const Py_ssize_t n_trees = b[6].len / 4;
+    const int32_t *table = (const int32_t *)b[0].buf;
+    const float *image = (const float *)b[1].buf;
+    const float *rows = (const float *)b[2].buf, *cols = (const float *)b[3].buf;
+    const float *row_scale = (const float *)b[4].buf, *col_scale = (const float *)b[5].buf;
+    const int32_t *roots = (const int32_t *)b[6].buf;
+    int32_t *out = (int32_t *)b[7].buf;
+    int ok = b[0].len % 32 == 0 && b[3].len / 4 == n && b[4].len / 4 == n &&
+             b[5].len / 4 == n && b[7].len / 4 == n * n_trees && levels >= 0 && height >= 0 &&
+             width >= 0 && (height + 2) * (width + 2) <= b[1].len / 4;
+    for (Py_ssize_t t = 0; t < n_trees && ok; t++)
+        if (roots[t] < 0 || roots[t] >= n_nodes) ok = 0;
+    if (!ok) {
+        for (int i = 0; i < 8; i++) PyBuffer_Release(&b[i]);
+        PyErr_SetString(PyExc_ValueError, "descend: inconsistent buffers or roots");
+        return NULL;
+    }
+    const float top_row = (float)(height + 1), top_col = (float)(width + 1);
+    const int32_t stride = (int32_t)(width + 2);
+    const Py_ssize_t total = n * n_trees, ahead = 16;
+    int bad = 0;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t t = 0; t < n_trees; t++)
+        for (Py_ssize_t i = 0; i < n; i++) out[t * n + i] = roots[t];
+    for (Py_ssize_t level = 0; level < levels && !bad; level++) {
+        for (Py_ssize_t j = 0, i = 0; j < total; j++, i = (i + 1 == n) ? 0 : i + 1) {
+#if defined(__GNUC__)
+            if (j + ahead < total) __builtin_prefetch(table + 8 * (Py_ssize_t)out[j + ahead]);
+#endif
+            const int32_t *rec = table + 8 * (Py_ssize_t)out[j];
+            const float *val = (const float *)rec;
+            float r, c;
+            r = val[0] * row_scale[i];
+            r = r + rows[i];
+            r = r < 0.0f ? 0.0f : (r > top_row ? top_row : r);
+            c = val[1] * col_scale[i];
+            c = c + cols[i];
+            c = c < 0.0f ? 0.0f : (c > top_col ? top_col : c);
+            const float first = image[(int32_t)r * stride + (int32_t)c];
+            r = val[2] * row_scale[i];
+            r = r + rows[i];
+            r = r < 0.0f ? 0.0f : (r > top_row ? top_row : r);
+            c = val[3] * col_scale[i];
+            c = c + cols[i];
+            c = c < 0.0f ? 0.0f : (c > top_col ? top_col : c);
+            const float second = image[(int32_t)r * stride + (int32_t)c];
+            const float feature = first - second;
+            const int32_t next = feature <= val[4] ? rec[5] : rec[6];
+            if (next < 0 || next >= n_nodes) bad = 1; /* never for a validated forest */
+            out[j] = bad ? 0 : next;
+        }
+    }
+    Py_END_ALLOW_THREADS
+    for (int i = 0; i < 8; i++) PyBuffer_Release(&b[i]);
+    if (bad) {
+        PyErr_SetString(PyExc_ValueError, "descend: a child index is out of range");
+        return NULL;
+    }
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef methods[] = {
+    {"descend", descend, METH_VARARGS,
+     "descend(table, image, rows, cols, row_scale, col_scale, roots, levels, height, width, "
+     "out): the forest's descent."},
+    {"dijkstra", dijkstra, METH_VARARGS,
+     "dijkstra(indptr, indices, data, n, sources, limits, out): multi-run Dijkstra."},
+    {NULL, NULL, 0, NULL}};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_ckernels", "Compiled kernels of posedrift.labelling.", -1, methods,
+    NULL, NULL, NULL, NULL};
+
+PyMODINIT_FUNC PyInit__ckernels(void) { return PyModule_Create(&module); }
