@@ -25,24 +25,24 @@ _J = JOINT_INDEX
 # to pelvis centre). Fitted by `python scripts/fit_kinect_convention.py` on the
 # development UTD-MHAD sequences (subjects 1-4, trial 1, 108 sequences) from the
 # default PoseTracker's output. Cross-validated by subject (fit on two, scored on the
-# other two): mAP@10cm 0.62 -> 0.83-0.84, MPJPE 95-98 -> 67-71 mm.
+# other two): mAP@10cm 0.63 -> 0.84, MPJPE 93-94 -> 65-67 mm.
 _KINECT_OFFSETS = np.array(
     [
-        [-0.031, 0.029, -0.056],  # head
-        [-0.027, -0.053, -0.022],  # neck
-        [-0.002, -0.113, -0.021],  # right_shoulder
-        [-0.052, -0.162, -0.025],  # left_shoulder
-        [-0.020, -0.155, 0.006],  # right_elbow
-        [-0.056, -0.214, -0.008],  # left_elbow
-        [-0.011, -0.145, 0.048],  # right_hand
-        [-0.061, -0.209, 0.041],  # left_hand
-        [-0.035, 0.018, -0.004],  # torso
-        [0.057, 0.086, 0.005],  # right_hip
-        [-0.143, 0.103, 0.023],  # left_hip
-        [0.008, -0.021, -0.067],  # right_knee
-        [-0.068, 0.028, -0.047],  # left_knee
-        [0.004, 0.003, 0.004],  # right_foot
-        [-0.047, 0.031, -0.005],  # left_foot
+        [-0.032, 0.026, -0.056],  # head
+        [-0.027, -0.054, -0.026],  # neck
+        [-0.003, -0.113, -0.022],  # right_shoulder
+        [-0.051, -0.162, -0.027],  # left_shoulder
+        [-0.019, -0.156, 0.006],  # right_elbow
+        [-0.056, -0.215, -0.011],  # left_elbow
+        [-0.009, -0.145, 0.046],  # right_hand
+        [-0.060, -0.212, 0.036],  # left_hand
+        [-0.035, 0.018, -0.009],  # torso
+        [0.058, 0.087, -0.001],  # right_hip
+        [-0.144, 0.102, 0.017],  # left_hip
+        [0.006, -0.021, -0.068],  # right_knee
+        [-0.067, 0.027, -0.048],  # left_knee
+        [0.002, 0.004, 0.004],  # right_foot
+        [-0.045, 0.032, -0.003],  # left_foot
     ]
 )
 _KINECT_OFFSETS.setflags(write=False)
