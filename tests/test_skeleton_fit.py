@@ -8,7 +8,23 @@ import pytest
 from posedrift.labelling import geodesic_graph
 from posedrift.points import downsample
 from posedrift.skeleton import JOINT_INDEX, JOINT_PARENTS, joint_angles, part_modes
-from posedrift.skeleton._fit import fit_skeleton, prior_bone_lengths
+from posedrift.skeleton._fit import (
+    _J,
+    _LIMBS,
+    _P,
+    LIMB_DIRECTION_WEIGHTS,
+    N_PARTS,
+    PART_RADII,
+    RING_JOINTS,
+    SEGMENT_RATIOS,
+    SkeletonFit,
+    bone_anchors,
+    fit_skeleton,
+    part_axes,
+    part_boundaries,
+    prior_bone_lengths,
+    ring_joints,
+)
 
 J = JOINT_INDEX
 
@@ -116,3 +132,354 @@ def test_prior_bone_lengths_follow_the_ratios():
     assert abs(bones[J["right_elbow"]] - 0.186 * 1.75) < 1e-9
     assert abs(bones[J["left_foot"]] - 0.246 * 1.75) < 1e-9
     assert bones[J["torso"]] == 0.0
+
+
+# ---------------------------------------------------------------------------------------------
+# The fast skeleton fit against the original implementation (kept verbatim below, docstrings
+# dropped): bit-for-bit equal outputs on real and random inputs.
+
+
+def _ref_part_boundaries(
+    points: np.ndarray, labels: np.ndarray, rows: np.ndarray, cols: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    la, lb = labels[rows], labels[cols]
+    ok = (la != lb) & (la >= 0) & (lb >= 0) & (la < N_PARTS) & (lb < N_PARTS)
+    a, b = np.minimum(la[ok], lb[ok]), np.maximum(la[ok], lb[ok])
+    code = a * N_PARTS + b
+    mid = 0.5 * (points[rows[ok]] + points[cols[ok]])
+    counts = np.bincount(code, minlength=N_PARTS * N_PARTS)
+    centres = np.full((N_PARTS * N_PARTS, 3), np.nan)
+    have = counts > 0
+    for d in range(3):
+        centres[have, d] = (
+            np.bincount(code, weights=mid[:, d], minlength=N_PARTS * N_PARTS)[have] / counts[have]
+        )
+    centres = centres.reshape(N_PARTS, N_PARTS, 3)
+    counts = counts.reshape(N_PARTS, N_PARTS)
+    upper = np.triu_indices(N_PARTS, 1)
+    centres[upper[1], upper[0]] = centres[upper]
+    counts = counts + counts.T
+    return centres, counts
+
+
+def _ref_part_axes(
+    points: np.ndarray, labels: np.ndarray, *, min_points: int = 5
+) -> tuple[np.ndarray, np.ndarray]:
+    axes = np.full((N_PARTS, 3), np.nan)
+    elong = np.zeros(N_PARTS)
+    ok = (labels >= 0) & (labels < N_PARTS)
+    lab, p = labels[ok], points[ok]
+    counts = np.bincount(lab, minlength=N_PARTS)
+    means = np.zeros((N_PARTS, 3))
+    for d in range(3):
+        means[:, d] = np.bincount(lab, weights=p[:, d], minlength=N_PARTS) / np.maximum(counts, 1)
+    c = p - means[lab]
+    cov = np.zeros((N_PARTS, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            cov[:, i, j] = np.bincount(lab, weights=c[:, i] * c[:, j], minlength=N_PARTS)
+            cov[:, j, i] = cov[:, i, j]
+    good = counts >= min_points
+    if good.any():
+        w, v = np.linalg.eigh(cov[good])
+        axes[good] = v[:, :, 2]
+        elong[good] = w[:, 2] / np.maximum(w[:, 1], 1e-12)
+    return axes, elong
+
+
+def _ref_unit(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v)
+    return v / n if n > 1e-12 else np.full(3, np.nan)
+
+
+def _ref_push(p: np.ndarray, radius: float) -> np.ndarray:
+    return p + radius * _ref_unit(p)
+
+
+def _ref_ring_joints(
+    centres: np.ndarray, counts: np.ndarray, *, height: float, min_edges: int = 2
+) -> dict[str, tuple[np.ndarray, float]]:
+    scale = height / 1.75
+    raw = {}
+    for name, (pa, pb, radius) in RING_JOINTS.items():
+        a, b = _P[pa], _P[pb]
+        if counts[a, b] >= min_edges:
+            raw[name] = (_ref_push(centres[a, b], radius * scale), min(1.0, counts[a, b] / 4.0))
+    out = dict(raw)
+    for side, other in (("right", "left"), ("left", "right")):
+        knee, hip = raw.get(f"{side}_knee"), raw.get(f"{side}_hip")
+        if knee is not None and hip is not None:
+            up = _ref_unit(hip[0] - knee[0])
+            out[f"{side}_knee"] = (knee[0] + 0.035 * scale * up, knee[1])
+            lateral = np.zeros(3)
+            if f"{other}_hip" in raw:
+                lat = hip[0] - raw[f"{other}_hip"][0]
+                lat = lat - (lat @ up) * up
+                lateral = 0.025 * scale * _ref_unit(lat)
+            if np.isfinite(lateral).all():
+                out[f"{side}_hip"] = (hip[0] + 0.035 * scale * up + lateral, hip[1])
+        elif hip is not None:
+            del out[f"{side}_hip"]
+    trunk_up = None
+    if "neck" in raw and "right_hip" in out and "left_hip" in out:
+        trunk_up = _ref_unit(raw["neck"][0] - 0.5 * (out["right_hip"][0] + out["left_hip"][0]))
+    for side in ("right", "left"):
+        name = f"{side}_shoulder"
+        if name in out:
+            if trunk_up is not None and np.isfinite(trunk_up).all():
+                out[name] = (raw[name][0] + 0.045 * scale * trunk_up, raw[name][1])
+            else:
+                del out[name]
+    return out
+
+
+def _ref_fit_skeleton(
+    points: np.ndarray,
+    labels: np.ndarray,
+    *,
+    bone_lengths: np.ndarray,
+    edges: tuple[np.ndarray, np.ndarray],
+    modes: np.ndarray | None = None,
+    prediction: np.ndarray | None = None,
+    height: float | None = None,
+    min_edges: int = 2,
+    min_part_points: int = 4,
+    min_elongation: float = 3.0,
+    smoothing: float = 0.0,
+) -> SkeletonFit:
+    from posedrift.skeleton._meanshift import part_modes
+
+    points = np.asarray(points, dtype=float)
+    labels = np.asarray(labels).astype(np.int64)
+    bone_lengths = np.asarray(bone_lengths, dtype=float)
+    if height is None:
+        height = float(bone_lengths[_J["right_foot"]] / SEGMENT_RATIOS["shank"])
+    rows, cols = edges
+    if modes is None:
+        modes = part_modes(points, labels, bandwidth=0.06)
+    counts = np.bincount(labels[(labels >= 0) & (labels < N_PARTS)], minlength=N_PARTS)
+    pred = None if prediction is None else np.asarray(prediction, dtype=float)
+    centres, ecounts = _ref_part_boundaries(points, labels, rows, cols)
+    axes, elong = _ref_part_axes(points, labels, min_points=min_part_points)
+    ring = _ref_ring_joints(centres, ecounts, height=height, min_edges=min_edges)
+
+    joints = np.full((15, 3), np.nan)
+    conf = np.zeros(15)
+    measured = np.zeros(15, dtype=bool)
+
+    def blend(i: int, value: np.ndarray) -> np.ndarray:
+        if smoothing > 0 and pred is not None and np.isfinite(pred[i]).all():
+            return (1.0 - smoothing) * value + smoothing * pred[i]
+        return value
+
+    for name in ("neck", "right_elbow", "left_elbow", "right_knee", "left_knee"):
+        i = _J[name]
+        if name in ring:
+            joints[i] = blend(i, ring[name][0])
+            conf[i] = ring[name][1]
+            measured[i] = True
+        elif pred is not None and np.isfinite(pred[i]).all():
+            joints[i] = pred[i]
+            conf[i] = 0.3
+        else:  # Between the modes of the two parts that meet there.
+            pa, pb, _ = RING_JOINTS[name]
+            between = 0.5 * (modes[_P[pa]] + modes[_P[pb]])
+            if np.isfinite(between).all():
+                joints[i] = _ref_push(between, RING_JOINTS[name][2])
+                conf[i] = 0.2
+
+    modes_back = modes + PART_RADII[:, None] * (
+        modes / np.maximum(np.linalg.norm(modes, axis=1, keepdims=True), 1e-9)
+    )
+    for anchor_name, part_name, joint_name in _LIMBS:
+        ia, part, ij = _J[anchor_name], _P[part_name], _J[joint_name]
+        length = bone_lengths[ij] if JOINT_PARENTS[ij] == ia else bone_lengths[ia]
+        anchor = joints[ia]
+        direction = np.full(3, np.nan)
+        if np.isfinite(anchor).all() and counts[part] >= min_part_points:
+            w_axis, w_ring = LIMB_DIRECTION_WEIGHTS[part_name.split("_", 1)[1]]
+            to_mode = _ref_unit(modes_back[part] - anchor)
+            if elong[part] >= min_elongation and np.isfinite(to_mode).all():
+                axis = axes[part]
+                direction = axis if axis @ to_mode >= 0 else -axis
+            else:
+                direction = to_mode
+            if joint_name in ring and w_ring > 0:
+                to_ring = _ref_unit(ring[joint_name][0] - anchor)
+                if np.isfinite(to_ring).all():
+                    direction = _ref_unit(w_axis * direction + w_ring * to_ring)
+        if np.isfinite(direction).all():
+            joints[ij] = blend(ij, anchor + length * direction)
+            conf[ij] = conf[ia] * min(1.0, counts[part] / 8.0)
+            measured[ij] = measured[ia]
+        elif pred is not None and np.isfinite(pred[ij]).all():
+            if np.isfinite(anchor).all() and np.isfinite(pred[ia]).all():
+                d = _ref_unit(pred[ij] - pred[ia])
+                joints[ij] = anchor + length * d if np.isfinite(d).all() else pred[ij]
+            else:
+                joints[ij] = pred[ij]
+            conf[ij] = 0.3 * max(conf[ia], 0.5)
+
+    # Head: from the neck towards the head's mode.
+    ih, ineck = _J["head"], _J["neck"]
+    if np.isfinite(joints[ineck]).all() and counts[_P["head"]] >= 1:
+        d = _ref_unit(modes_back[_P["head"]] - joints[ineck])
+        if np.isfinite(d).all():
+            joints[ih] = joints[ineck] + bone_lengths[ih] * d
+            conf[ih] = min(1.0, counts[_P["head"]] / 8.0) * max(conf[ineck], 0.5)
+            measured[ih] = True
+    if not np.isfinite(joints[ih]).all() and pred is not None:
+        joints[ih] = pred[ih]
+        conf[ih] = 0.3
+    # Torso: midpoint of neck and pelvis centre.
+    it = _J["torso"]
+    pelvis = 0.5 * (joints[_J["right_hip"]] + joints[_J["left_hip"]])
+    joints[it] = 0.5 * (joints[ineck] + pelvis)
+    if not np.isfinite(joints[it]).all() and pred is not None:
+        joints[it] = pred[it]
+    conf[it] = min(conf[ineck], conf[_J["right_hip"]], conf[_J["left_hip"]])
+    measured[it] = measured[ineck] and measured[_J["right_hip"]] and measured[_J["left_hip"]]
+
+    # Length agreement of measured ring-to-ring bones (health and confidence).
+    ratio = np.full(15, np.nan)
+    for child, parent in (
+        ("right_hand", "right_elbow"),
+        ("left_hand", "left_elbow"),
+        ("right_foot", "right_knee"),
+        ("left_foot", "left_knee"),
+    ):
+        if child in ring and parent in ring:
+            dist = np.linalg.norm(ring[child][0] - ring[parent][0])
+            ratio[_J[child]] = dist / max(bone_lengths[_J[child]], 1e-6)
+            penalty = min(1.0, abs(ratio[_J[child]] - 1.0) / 0.5)
+            conf[_J[child]] *= 1.0 - 0.5 * penalty
+    conf = np.where(np.isfinite(joints).all(axis=1), np.clip(conf, 0.0, 1.0), 0.0)
+    return SkeletonFit(joints=joints, confidence=conf, measured=measured, length_ratio=ratio)
+
+
+def _ref_bone_anchors(joints: np.ndarray, bone_lengths: np.ndarray, *, n: int = 3) -> np.ndarray:
+    j = np.asarray(joints, dtype=float)
+    pelvis = 0.5 * (j[_J["right_hip"]] + j[_J["left_hip"]])
+    starts = np.full((N_PARTS, 3), np.nan)
+    ends = np.full((N_PARTS, 3), np.nan)
+    starts[_P["head"]], ends[_P["head"]] = j[_J["neck"]], j[_J["head"]]
+    starts[_P["upper_torso"]], ends[_P["upper_torso"]] = j[_J["neck"]], j[_J["torso"]]
+    starts[_P["lower_torso"]], ends[_P["lower_torso"]] = j[_J["torso"]], pelvis
+    for side in ("right", "left"):
+        sh, el, wr = j[_J[f"{side}_shoulder"]], j[_J[f"{side}_elbow"]], j[_J[f"{side}_hand"]]
+        hip, kn, an = j[_J[f"{side}_hip"]], j[_J[f"{side}_knee"]], j[_J[f"{side}_foot"]]
+        for part, a, b in (
+            ("upper_arm", sh, el),
+            ("forearm", el, wr),
+            ("thigh", hip, kn),
+            ("shank", kn, an),
+        ):
+            starts[_P[f"{side}_{part}"]], ends[_P[f"{side}_{part}"]] = a, b
+        hand_len = 0.74 * bone_lengths[_J[f"{side}_hand"]]
+        starts[_P[f"{side}_hand"]] = wr
+        ends[_P[f"{side}_hand"]] = wr + hand_len * _ref_unit(wr - el)
+        starts[_P[f"{side}_foot"]] = an
+        ends[_P[f"{side}_foot"]] = an + 0.1 * bone_lengths[_J[f"{side}_foot"]] * _ref_unit(an - kn)
+    t = (np.arange(n) + 0.5) / n
+    return starts[:, None, :] + t[None, :, None] * (ends - starts)[:, None, :]
+
+
+def _assert_same(new, ref):
+    """Bit-for-bit equality of arrays (NaN where NaN), tuples, dicts and SkeletonFit."""
+    if isinstance(ref, SkeletonFit):
+        for field in ("joints", "confidence", "measured", "length_ratio"):
+            _assert_same(getattr(new, field), getattr(ref, field))
+    elif isinstance(ref, dict):
+        assert new.keys() == ref.keys()
+        for key in ref:
+            _assert_same(new[key], ref[key])
+    elif isinstance(ref, tuple):
+        assert len(new) == len(ref)
+        for a, b in zip(new, ref, strict=True):
+            _assert_same(a, b)
+    else:
+        new, ref = np.asarray(new), np.asarray(ref)
+        assert new.dtype == ref.dtype and new.shape == ref.shape
+        np.testing.assert_array_equal(new, ref, strict=True)
+
+
+def _random_case(rendered, seed):
+    """A frame's points and labels with random damage, and the fit's other inputs."""
+    rng = np.random.default_rng(seed)
+    points, labels = _frame_points(rendered, int(rng.integers(0, 150)))
+    labels = labels.copy()
+    flip = rng.random(len(labels)) < rng.choice([0.0, 0.05, 0.3])
+    labels[flip] = rng.integers(-1, N_PARTS, size=flip.sum())
+    for part in rng.choice(N_PARTS, size=rng.integers(0, 5), replace=False):
+        labels[labels == part] = -1 if rng.random() < 0.5 else rng.integers(0, N_PARTS)
+    graph = geodesic_graph(points)
+    bones = prior_bone_lengths(rng.uniform(1.4, 1.95))
+    truth = rendered.reference.joints[0]
+    prediction = None
+    if rng.random() < 0.7:
+        prediction = truth + rng.normal(scale=0.03, size=truth.shape)
+        prediction[rng.random(15) < 0.2] = np.nan
+    modes = None if rng.random() < 0.5 else part_modes(points, labels, bandwidth=0.06)
+    options = {
+        "bone_lengths": bones,
+        "edges": (graph.rows, graph.cols),
+        "modes": modes,
+        "prediction": prediction,
+        "height": None if rng.random() < 0.3 else rng.uniform(1.4, 1.95),
+        "smoothing": float(rng.choice([0.0, 0.3, 0.6])),
+        "min_elongation": float(rng.choice([3.0, 1.5, 50.0])),
+    }
+    return points, labels, options
+
+
+@pytest.mark.parametrize("seed", range(24))
+def test_fast_fit_matches_the_original_bit_for_bit(rendered, seed):
+    points, labels, options = _random_case(rendered, seed)
+    _assert_same(
+        fit_skeleton(points, labels, **options), _ref_fit_skeleton(points, labels, **options)
+    )
+    rows, cols = options["edges"]
+    centres, counts = part_boundaries(points, labels, rows, cols)
+    _assert_same((centres, counts), _ref_part_boundaries(points, labels, rows, cols))
+    for min_points in (1, 4, 30):
+        _assert_same(
+            part_axes(points, labels, min_points=min_points),
+            _ref_part_axes(points, labels, min_points=min_points),
+        )
+    for min_edges in (1, 2, 6):
+        _assert_same(
+            ring_joints(centres, counts, height=1.7, min_edges=min_edges),
+            _ref_ring_joints(centres, counts, height=1.7, min_edges=min_edges),
+        )
+    joints = fit_skeleton(points, labels, **options).joints
+    for n in (1, 3):
+        _assert_same(
+            bone_anchors(joints, options["bone_lengths"], n=n),
+            _ref_bone_anchors(joints, options["bone_lengths"], n=n),
+        )
+
+
+def test_fast_fit_matches_the_original_on_random_clouds():
+    rng = np.random.default_rng(7)
+    for _ in range(30):
+        n = int(rng.integers(20, 500))
+        points = rng.normal(scale=0.4, size=(n, 3)) + [0.0, 0.0, 2.5]
+        labels = rng.integers(-1, N_PARTS + 1, size=n)  # includes out-of-range labels
+        rows, cols = rng.integers(0, n, size=(2, 6 * n))
+        bones = prior_bone_lengths(1.75)
+        prediction = rng.normal(scale=0.5, size=(15, 3)) + [0.0, 0.0, 2.5]
+        kwargs = {"bone_lengths": bones, "edges": (rows, cols), "prediction": prediction}
+        kwargs["smoothing"] = 0.3
+        _assert_same(
+            fit_skeleton(points, labels, **kwargs), _ref_fit_skeleton(points, labels, **kwargs)
+        )
+        _assert_same(part_axes(points, labels), _ref_part_axes(points, labels))
+        centres, counts = part_boundaries(points, labels, rows, cols)
+        _assert_same((centres, counts), _ref_part_boundaries(points, labels, rows, cols))
+        _assert_same(
+            ring_joints(centres, counts, height=1.6, min_edges=1),
+            _ref_ring_joints(centres, counts, height=1.6, min_edges=1),
+        )
+        joints = rng.normal(size=(15, 3))
+        joints[rng.integers(0, 15)] = np.nan
+        _assert_same(bone_anchors(joints, bones), _ref_bone_anchors(joints, bones))

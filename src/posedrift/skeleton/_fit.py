@@ -20,11 +20,18 @@ confidence.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from posedrift.skeleton._definitions import JOINT_INDEX, JOINT_PARENTS, PART_INDEX, SEGMENT_RATIOS
+from posedrift.skeleton._definitions import (
+    JOINT_INDEX,
+    JOINT_PARENTS,
+    PART_INDEX,
+    PART_JOINTS,
+    SEGMENT_RATIOS,
+)
 
 _J = JOINT_INDEX
 _P = PART_INDEX
@@ -63,6 +70,13 @@ _LIMBS: tuple[tuple[str, str, str], ...] = (
     ("right_knee", "right_shank", "right_foot"),
     ("left_knee", "left_shank", "left_foot"),
 )
+
+_XYZ = np.arange(3)
+_UPPER = np.triu_indices(N_PARTS, 1)
+# Upper triangle of a 3 x 3 covariance (i <= j) and where each of its 9 entries comes from.
+_COV_I = np.array([0, 0, 0, 1, 1, 2])
+_COV_J = np.array([0, 1, 2, 1, 2, 2])
+_COV_FULL = np.array([0, 1, 2, 1, 3, 4, 2, 4, 5])
 
 
 def prior_bone_lengths(height: float) -> np.ndarray:
@@ -142,21 +156,25 @@ def part_boundaries(
         Edges joining each pair.
     """
     la, lb = labels[rows], labels[cols]
-    ok = (la != lb) & (la >= 0) & (lb >= 0) & (la < N_PARTS) & (lb < N_PARTS)
-    a, b = np.minimum(la[ok], lb[ok]), np.maximum(la[ok], lb[ok])
+    ok = la != lb
+    if len(labels) and (labels.min() < 0 or labels.max() >= N_PARTS):  # unknown labels
+        ok &= (la >= 0) & (lb >= 0) & (la < N_PARTS) & (lb < N_PARTS)
+    la, lb = la[ok], lb[ok]
+    a, b = np.minimum(la, lb), np.maximum(la, lb)
     code = a * N_PARTS + b
     mid = 0.5 * (points[rows[ok]] + points[cols[ok]])
     counts = np.bincount(code, minlength=N_PARTS * N_PARTS)
+    # One bincount for the three coordinates (bin 3 * code + d): each bin still adds its
+    # edges in edge order, so the sums are those of one bincount per coordinate.
+    sums = np.bincount(
+        (3 * code[:, None] + _XYZ).ravel(), weights=mid.ravel(), minlength=3 * N_PARTS * N_PARTS
+    ).reshape(N_PARTS * N_PARTS, 3)
     centres = np.full((N_PARTS * N_PARTS, 3), np.nan)
     have = counts > 0
-    for d in range(3):
-        centres[have, d] = (
-            np.bincount(code, weights=mid[:, d], minlength=N_PARTS * N_PARTS)[have] / counts[have]
-        )
+    centres[have] = sums[have] / counts[have, None]
     centres = centres.reshape(N_PARTS, N_PARTS, 3)
     counts = counts.reshape(N_PARTS, N_PARTS)
-    upper = np.triu_indices(N_PARTS, 1)
-    centres[upper[1], upper[0]] = centres[upper]
+    centres[_UPPER[1], _UPPER[0]] = centres[_UPPER]
     counts = counts + counts.T
     return centres, counts
 
@@ -176,17 +194,16 @@ def part_axes(
     axes = np.full((N_PARTS, 3), np.nan)
     elong = np.zeros(N_PARTS)
     ok = (labels >= 0) & (labels < N_PARTS)
-    lab, p = labels[ok], points[ok]
+    if ok.all():  # the usual case: no copies
+        lab, p = labels, points
+    else:
+        lab, p = labels[ok], points[ok]
     counts = np.bincount(lab, minlength=N_PARTS)
-    means = np.zeros((N_PARTS, 3))
-    for d in range(3):
-        means[:, d] = np.bincount(lab, weights=p[:, d], minlength=N_PARTS) / np.maximum(counts, 1)
+    # Per-part sums by one bincount over (part, component) bins; each bin adds its points
+    # in point order, as one bincount per component would.
+    means = _part_sums(lab, p) / np.maximum(counts, 1)[:, None]
     c = p - means[lab]
-    cov = np.zeros((N_PARTS, 3, 3))
-    for i in range(3):
-        for j in range(i, 3):
-            cov[:, i, j] = np.bincount(lab, weights=c[:, i] * c[:, j], minlength=N_PARTS)
-            cov[:, j, i] = cov[:, i, j]
+    cov = _part_sums(lab, c[:, _COV_I] * c[:, _COV_J])[:, _COV_FULL].reshape(N_PARTS, 3, 3)
     good = counts >= min_points
     if good.any():
         w, v = np.linalg.eigh(cov[good])
@@ -195,9 +212,22 @@ def part_axes(
     return axes, elong
 
 
+def _part_sums(lab: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Sum ``(15, K)`` of the rows of ``values (N, K)`` by part ``lab (N,)``."""
+    k = values.shape[1]
+    bins = (k * lab[:, None] + np.arange(k)).ravel()
+    return np.bincount(bins, weights=values.ravel(), minlength=k * N_PARTS).reshape(N_PARTS, k)
+
+
 def _unit(v: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(v)
+    # np.linalg.norm of a 1-D float vector is sqrt(v.dot(v)); this skips its overhead.
+    n = math.sqrt(v.dot(v))
     return v / n if n > 1e-12 else np.full(3, np.nan)
+
+
+def _finite(v: np.ndarray) -> bool:
+    """``np.isfinite(v).all()`` for a 3-vector, without the ufunc overhead."""
+    return math.isfinite(v[0]) and math.isfinite(v[1]) and math.isfinite(v[2])
 
 
 def _push(p: np.ndarray, radius: float) -> np.ndarray:
@@ -213,6 +243,27 @@ LIMB_DIRECTION_WEIGHTS: dict[str, tuple[float, float]] = {
     "thigh": (0.3, 1.0),
     "shank": (1.0, 0.5),
 }
+
+# _LIMBS as index arrays (for placing the eight limb joints at once), with their direction
+# weights: the tables above are read once, at import.
+_LIMB_ANCHOR = np.array([_J[a] for a, _, _ in _LIMBS])
+_LIMB_PART = np.array([_P[p] for _, p, _ in _LIMBS])
+_LIMB_JOINT = np.array([_J[j] for _, _, j in _LIMBS])
+_LIMB_NAMES = tuple(j for _, _, j in _LIMBS)
+# The bone of each limb joint: its own where its parent is the anchor, else the anchor's.
+_LIMB_LENGTH = np.array(
+    [j if JOINT_PARENTS[j] == a else a for a, j in zip(_LIMB_ANCHOR, _LIMB_JOINT, strict=True)]
+)
+_LIMB_W_AXIS, _LIMB_W_RING = (
+    np.array([LIMB_DIRECTION_WEIGHTS[p.split("_", 1)[1]][k] for _, p, _ in _LIMBS])[:, None]
+    for k in (0, 1)
+)
+_NAN3 = np.full(3, np.nan)
+# RING_JOINTS as arrays: the two parts meeting at each ring joint and its radius.
+_RING_NAMES = tuple(RING_JOINTS)
+_RING_A = np.array([_P[a] for a, _, _ in RING_JOINTS.values()])
+_RING_B = np.array([_P[b] for _, b, _ in RING_JOINTS.values()])
+_RING_RADII = np.array([r for _, _, r in RING_JOINTS.values()])
 
 
 def ring_joints(
@@ -231,11 +282,12 @@ def ring_joints(
         ``joint name -> (position (3,), support in [0, 1])`` for the boundaries seen.
     """
     scale = height / 1.75
-    raw = {}
-    for name, (pa, pb, radius) in RING_JOINTS.items():
-        a, b = _P[pa], _P[pb]
-        if counts[a, b] >= min_edges:
-            raw[name] = (_push(centres[a, b], radius * scale), min(1.0, counts[a, b] / 4.0))
+    # All thirteen boundaries pushed back at once (unseen ones are NaN and dropped).
+    edges = counts[_RING_A, _RING_B]
+    seen = centres[_RING_A, _RING_B]
+    pushed = seen + (_RING_RADII * scale)[:, None] * _units(seen)
+    support = np.minimum(1.0, edges / 4.0)
+    raw = {_RING_NAMES[k]: (pushed[k], support[k]) for k in np.flatnonzero(edges >= min_edges)}
     out = dict(raw)
     for side, other in (("right", "left"), ("left", "right")):
         knee, hip = raw.get(f"{side}_knee"), raw.get(f"{side}_hip")
@@ -247,7 +299,7 @@ def ring_joints(
                 lat = hip[0] - raw[f"{other}_hip"][0]
                 lat = lat - (lat @ up) * up
                 lateral = 0.025 * scale * _unit(lat)
-            if np.isfinite(lateral).all():
+            if _finite(lateral):
                 out[f"{side}_hip"] = (hip[0] + 0.035 * scale * up + lateral, hip[1])
         elif hip is not None:
             del out[f"{side}_hip"]
@@ -257,11 +309,88 @@ def ring_joints(
     for side in ("right", "left"):
         name = f"{side}_shoulder"
         if name in out:
-            if trunk_up is not None and np.isfinite(trunk_up).all():
+            if trunk_up is not None and _finite(trunk_up):
                 out[name] = (raw[name][0] + 0.045 * scale * trunk_up, raw[name][1])
             else:
                 del out[name]
     return out
+
+
+def _units(v: np.ndarray) -> np.ndarray:
+    """:func:`_unit` of each row of ``v (K, 3)`` (the same norms, computed row by row)."""
+    norms = np.array([math.sqrt(row.dot(row)) for row in v])
+    big = norms > 1e-12  # False for NaN
+    out = v / np.where(big, norms, 1.0)[:, None]
+    out[~big] = np.nan
+    return out
+
+
+def _rows_finite(v: np.ndarray) -> np.ndarray:
+    """Whether each row of ``v (K, 3)`` is finite."""
+    return np.isfinite(v).all(axis=1)
+
+
+def _place_limbs(
+    joints: np.ndarray,
+    conf: np.ndarray,
+    measured: np.ndarray,
+    *,
+    bone_lengths: np.ndarray,
+    counts: np.ndarray,
+    modes_back: np.ndarray,
+    axes: np.ndarray,
+    elong: np.ndarray,
+    ring: dict[str, tuple[np.ndarray, float]],
+    pred: np.ndarray | None,
+    smoothing: float,
+    min_part_points: int,
+    min_elongation: float,
+) -> None:
+    """Place the eight limb joints of :data:`_LIMBS` from their anchors, in place.
+
+    All eight at once (they depend only on their anchors, placed before): each
+    follows a mix of its part's oriented principal axis (or the direction to the
+    part's mode) and the direction to its own ring joint, for its bone length.
+    Joints without a direction fall back on the prediction.
+    """
+    ia, part, ij = _LIMB_ANCHOR, _LIMB_PART, _LIMB_JOINT
+    lengths = bone_lengths[_LIMB_LENGTH]
+    anchor = joints[ia]
+    live = _rows_finite(anchor) & (counts[part] >= min_part_points)
+    to_mode = _units(modes_back[part] - anchor)
+    # The part's axis, turned towards its mode, where the part is elongated enough.
+    axis = axes[part]
+    use_axis = live & (elong[part] >= min_elongation) & _rows_finite(to_mode)
+    facing = (axis * to_mode).sum(axis=1) >= 0  # the sign of axis @ to_mode
+    direction = np.where(use_axis[:, None], np.where(facing[:, None], axis, -axis), to_mode)
+    direction[~live] = np.nan
+    # Mixed with the direction to the ring joint at the limb's far end, where seen.
+    far = np.array([ring[name][0] if name in ring else _NAN3 for name in _LIMB_NAMES])
+    to_ring = _units(far - anchor)
+    mix = live & (_LIMB_W_RING[:, 0] > 0) & _rows_finite(to_ring)
+    if mix.any():
+        mixed = _units(_LIMB_W_AXIS[mix] * direction[mix] + _LIMB_W_RING[mix] * to_ring[mix])
+        direction[mix] = mixed
+    placed = _rows_finite(direction)
+    value = anchor + lengths[:, None] * direction
+    if smoothing > 0 and pred is not None:
+        smooth = placed & _rows_finite(pred[ij])
+        value[smooth] = (1.0 - smoothing) * value[smooth] + smoothing * pred[ij][smooth]
+    joints[ij[placed]] = value[placed]
+    conf[ij[placed]] = (conf[ia] * np.minimum(1.0, counts[part] / 8.0))[placed]
+    measured[ij[placed]] = measured[ia[placed]]
+    if pred is None:
+        return
+    for k in np.flatnonzero(~placed):  # Rare: follow the predicted bone's direction.
+        a, j = ia[k], ij[k]
+        if not _finite(pred[j]):
+            continue
+        if _finite(anchor[k]) and _finite(pred[a]):
+            d = _unit(pred[j] - pred[a])
+            joints[j] = anchor[k] + lengths[k] * d if _finite(d) else pred[j]
+        else:
+            joints[j] = pred[j]
+        conf[j] = 0.3 * max(conf[a], 0.5)
 
 
 def fit_skeleton(
@@ -338,7 +467,7 @@ def fit_skeleton(
     measured = np.zeros(15, dtype=bool)
 
     def blend(i: int, value: np.ndarray) -> np.ndarray:
-        if smoothing > 0 and pred is not None and np.isfinite(pred[i]).all():
+        if smoothing > 0 and pred is not None and _finite(pred[i]):
             return (1.0 - smoothing) * value + smoothing * pred[i]
         return value
 
@@ -348,64 +477,51 @@ def fit_skeleton(
             joints[i] = blend(i, ring[name][0])
             conf[i] = ring[name][1]
             measured[i] = True
-        elif pred is not None and np.isfinite(pred[i]).all():
+        elif pred is not None and _finite(pred[i]):
             joints[i] = pred[i]
             conf[i] = 0.3
         else:  # Between the modes of the two parts that meet there.
             pa, pb, _ = RING_JOINTS[name]
             between = 0.5 * (modes[_P[pa]] + modes[_P[pb]])
-            if np.isfinite(between).all():
+            if _finite(between):
                 joints[i] = _push(between, RING_JOINTS[name][2])
                 conf[i] = 0.2
 
     modes_back = modes + PART_RADII[:, None] * (
         modes / np.maximum(np.linalg.norm(modes, axis=1, keepdims=True), 1e-9)
     )
-    for anchor_name, part_name, joint_name in _LIMBS:
-        ia, part, ij = _J[anchor_name], _P[part_name], _J[joint_name]
-        length = bone_lengths[ij] if JOINT_PARENTS[ij] == ia else bone_lengths[ia]
-        anchor = joints[ia]
-        direction = np.full(3, np.nan)
-        if np.isfinite(anchor).all() and counts[part] >= min_part_points:
-            w_axis, w_ring = LIMB_DIRECTION_WEIGHTS[part_name.split("_", 1)[1]]
-            to_mode = _unit(modes_back[part] - anchor)
-            if elong[part] >= min_elongation and np.isfinite(to_mode).all():
-                axis = axes[part]
-                direction = axis if axis @ to_mode >= 0 else -axis
-            else:
-                direction = to_mode
-            if joint_name in ring and w_ring > 0:
-                to_ring = _unit(ring[joint_name][0] - anchor)
-                if np.isfinite(to_ring).all():
-                    direction = _unit(w_axis * direction + w_ring * to_ring)
-        if np.isfinite(direction).all():
-            joints[ij] = blend(ij, anchor + length * direction)
-            conf[ij] = conf[ia] * min(1.0, counts[part] / 8.0)
-            measured[ij] = measured[ia]
-        elif pred is not None and np.isfinite(pred[ij]).all():
-            if np.isfinite(anchor).all() and np.isfinite(pred[ia]).all():
-                d = _unit(pred[ij] - pred[ia])
-                joints[ij] = anchor + length * d if np.isfinite(d).all() else pred[ij]
-            else:
-                joints[ij] = pred[ij]
-            conf[ij] = 0.3 * max(conf[ia], 0.5)
+    _place_limbs(
+        joints,
+        conf,
+        measured,
+        bone_lengths=bone_lengths,
+        counts=counts,
+        modes_back=modes_back,
+        axes=axes,
+        elong=elong,
+        ring=ring,
+        pred=pred,
+        smoothing=smoothing,
+        min_part_points=min_part_points,
+        min_elongation=min_elongation,
+    )
 
     # Head: from the neck towards the head's mode.
     ih, ineck = _J["head"], _J["neck"]
-    if np.isfinite(joints[ineck]).all() and counts[_P["head"]] >= 1:
+    if _finite(joints[ineck]) and counts[_P["head"]] >= 1:
         d = _unit(modes_back[_P["head"]] - joints[ineck])
-        if np.isfinite(d).all():
+        if _finite(d):
             joints[ih] = joints[ineck] + bone_lengths[ih] * d
             conf[ih] = min(1.0, counts[_P["head"]] / 8.0) * max(conf[ineck], 0.5)
             measured[ih] = True
-    if not np.isfinite(joints[ih]).all() and pred is not None:
+    if not _finite(joints[ih]) and pred is not None:
         joints[ih] = pred[ih]
         conf[ih] = 0.3
     # Torso: midpoint of neck and pelvis centre.
     it = _J["torso"]
     pelvis = 0.5 * (joints[_J["right_hip"]] + joints[_J["left_hip"]])
     joints[it] = 0.5 * (joints[ineck] + pelvis)
-    if not np.isfinite(joints[it]).all() and pred is not None:
+    if not _finite(joints[it]) and pred is not None:
         joints[it] = pred[it]
     conf[it] = min(conf[ineck], conf[_J["right_hip"]], conf[_J["left_hip"]])
     measured[it] = measured[ineck] and measured[_J["right_hip"]] and measured[_J["left_hip"]]
@@ -419,7 +535,8 @@ def fit_skeleton(
         ("left_foot", "left_knee"),
     ):
         if child in ring and parent in ring:
-            dist = np.linalg.norm(ring[child][0] - ring[parent][0])
+            gap = ring[child][0] - ring[parent][0]
+            dist = math.sqrt(gap.dot(gap))  # np.linalg.norm(gap), without its overhead
             ratio[_J[child]] = dist / max(bone_lengths[_J[child]], 1e-6)
             penalty = min(1.0, abs(ratio[_J[child]] - 1.0) / 0.5)
             conf[_J[child]] *= 1.0 - 0.5 * penalty
@@ -460,26 +577,33 @@ def bone_anchors(joints: np.ndarray, bone_lengths: np.ndarray, *, n: int = 3) ->
     at ``(i + 0.5) / n`` of their length.
     """
     j = np.asarray(joints, dtype=float)
-    pelvis = 0.5 * (j[_J["right_hip"]] + j[_J["left_hip"]])
-    starts = np.full((N_PARTS, 3), np.nan)
-    ends = np.full((N_PARTS, 3), np.nan)
-    starts[_P["head"]], ends[_P["head"]] = j[_J["neck"]], j[_J["head"]]
-    starts[_P["upper_torso"]], ends[_P["upper_torso"]] = j[_J["neck"]], j[_J["torso"]]
-    starts[_P["lower_torso"]], ends[_P["lower_torso"]] = j[_J["torso"]], pelvis
+    ext = np.empty((len(_BONE_ROW), 3))  # the joints, then the pelvis and the limb ends
+    ext[: len(_J)] = j
+    ext[_BONE_ROW["pelvis"]] = 0.5 * (j[_J["right_hip"]] + j[_J["left_hip"]])
     for side in ("right", "left"):
-        sh, el, wr = j[_J[f"{side}_shoulder"]], j[_J[f"{side}_elbow"]], j[_J[f"{side}_hand"]]
-        hip, kn, an = j[_J[f"{side}_hip"]], j[_J[f"{side}_knee"]], j[_J[f"{side}_foot"]]
-        for part, a, b in (
-            ("upper_arm", sh, el),
-            ("forearm", el, wr),
-            ("thigh", hip, kn),
-            ("shank", kn, an),
-        ):
-            starts[_P[f"{side}_{part}"]], ends[_P[f"{side}_{part}"]] = a, b
+        el, wr = j[_J[f"{side}_elbow"]], j[_J[f"{side}_hand"]]
+        kn, an = j[_J[f"{side}_knee"]], j[_J[f"{side}_foot"]]
         hand_len = 0.74 * bone_lengths[_J[f"{side}_hand"]]
-        starts[_P[f"{side}_hand"]] = wr
-        ends[_P[f"{side}_hand"]] = wr + hand_len * _unit(wr - el)
-        starts[_P[f"{side}_foot"]] = an
-        ends[_P[f"{side}_foot"]] = an + 0.1 * bone_lengths[_J[f"{side}_foot"]] * _unit(an - kn)
+        ext[_BONE_ROW[f"{side}_hand_end"]] = wr + hand_len * _unit(wr - el)
+        foot_len = 0.1 * bone_lengths[_J[f"{side}_foot"]]
+        ext[_BONE_ROW[f"{side}_foot_end"]] = an + foot_len * _unit(an - kn)
+    starts, ends = ext[_BONE_START], ext[_BONE_END]
     t = (np.arange(n) + 0.5) / n
     return starts[:, None, :] + t[None, :, None] * (ends - starts)[:, None, :]
+
+
+# Rows of bone_anchors' extended joint array: the 15 joints, the pelvis, the hand and foot ends.
+_BONE_ROW = {
+    **_J,
+    **{
+        name: len(_J) + k
+        for k, name in enumerate(
+            ("pelvis", "right_hand_end", "left_hand_end", "right_foot_end", "left_foot_end")
+        )
+    },
+}
+# Each part's bone (PART_JOINTS, with the hands and feet ending at the computed ends).
+_BONE_ENDS = {"right_hand_tip": "right_hand_end", "left_hand_tip": "left_hand_end"}
+_BONE_ENDS.update({"right_toe": "right_foot_end", "left_toe": "left_foot_end"})
+_BONE_START = np.array([_BONE_ROW[a] for a, _ in PART_JOINTS])
+_BONE_END = np.array([_BONE_ROW[_BONE_ENDS.get(b, b)] for _, b in PART_JOINTS])

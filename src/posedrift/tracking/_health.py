@@ -36,21 +36,31 @@ class Health:
     measured: float
 
 
+# Bone ends beyond the 15 joints, as rows of the extended joint array of _segments.
+_EXTRA = ("pelvis", "right_hand_tip", "left_hand_tip", "right_toe", "left_toe")
+_ROW = {**_J, **{name: len(_J) + k for k, name in enumerate(_EXTRA)}}
+_SEG_START = np.array([_ROW[a] for a, _ in PART_JOINTS])
+_SEG_END = np.array([_ROW[b] for _, b in PART_JOINTS])
+_HANDS = np.array([_J["right_hand"], _J["left_hand"]])
+_ELBOWS = np.array([_J["right_elbow"], _J["left_elbow"]])
+_FEET = np.array([_J["right_foot"], _J["left_foot"]])
+_KNEES = np.array([_J["right_knee"], _J["left_knee"]])
+# Limb joints checked for floating away from the body (JOINT_INDEX order).
+_LIMB_NAMES = tuple(n for n in _J if n.endswith(("elbow", "hand", "knee", "foot")))
+_LIMBS = np.array([_J[n] for n in _LIMB_NAMES])
+
+
 def _segments(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Start and end ``(15, 3)`` of each part's bone (hands and feet as short stubs)."""
     j = joints
-    pelvis = 0.5 * (j[_J["right_hip"]] + j[_J["left_hip"]])
-    named = {name: j[i] for name, i in _J.items()}
-    named["pelvis"] = pelvis
-    for side in ("right", "left"):
-        fore = j[_J[f"{side}_hand"]] - j[_J[f"{side}_elbow"]]
-        named[f"{side}_hand_tip"] = j[_J[f"{side}_hand"]] + 0.6 * fore
-        shank = j[_J[f"{side}_foot"]] - j[_J[f"{side}_knee"]]
-        named[f"{side}_toe"] = j[_J[f"{side}_foot"]] + 0.15 * shank
-    starts = np.array([named[a] for a, _ in PART_JOINTS])
-    ends = np.array([named[b] for _, b in PART_JOINTS])
-    # The torso parts are wide: widen their "bones" to the shoulders and hips.
-    return starts, ends
+    ext = np.empty((len(_ROW), 3))
+    ext[: len(_J)] = j
+    ext[_ROW["pelvis"]] = 0.5 * (j[_J["right_hip"]] + j[_J["left_hip"]])
+    ext[[_ROW["right_hand_tip"], _ROW["left_hand_tip"]]] = j[_HANDS] + 0.6 * (
+        j[_HANDS] - j[_ELBOWS]
+    )
+    ext[[_ROW["right_toe"], _ROW["left_toe"]]] = j[_FEET] + 0.15 * (j[_FEET] - j[_KNEES])
+    return ext[_SEG_START], ext[_SEG_END]
 
 
 def bone_distances(points: np.ndarray, labels: np.ndarray, joints: np.ndarray) -> np.ndarray:
@@ -61,12 +71,26 @@ def bone_distances(points: np.ndarray, labels: np.ndarray, joints: np.ndarray) -
     out = np.full(len(points), np.nan)
     if not ok.any():
         return out
-    a, b = starts[lab[ok]], ends[lab[ok]]
-    ab = b - a
+    if not ok.all():  # (usually all are: no copies)
+        points, lab = points[ok], lab[ok]
+    a = starts[lab]
+    ab = (ends - starts)[lab]  # the same differences as ends[lab] - starts[lab]
     denom = np.einsum("ij,ij->i", ab, ab)
-    t = np.clip(np.einsum("ij,ij->i", points[ok] - a, ab) / np.where(denom > 0, denom, 1.0), 0, 1)
-    out[ok] = np.linalg.norm(points[ok] - (a + t[:, None] * ab), axis=1)
+    t = np.clip(np.einsum("ij,ij->i", points - a, ab) / np.where(denom > 0, denom, 1.0), 0, 1)
+    out[ok] = np.linalg.norm(points - (a + t[:, None] * ab), axis=1)
     return out
+
+
+def _joint_gaps(points: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """Distance (metres) from each joint ``(K, 3)`` to the nearest point.
+
+    Coordinate by coordinate: the same sums as ``((joints[:, None] - points) ** 2).sum(-1)``
+    without the ``(K, N, 3)`` array.
+    """
+    d2 = (joints[:, 0, None] - points[:, 0]) ** 2
+    d2 += (joints[:, 1, None] - points[:, 1]) ** 2
+    d2 += (joints[:, 2, None] - points[:, 2]) ** 2
+    return np.sqrt(d2.min(axis=1))
 
 
 # Expected surface distance of each part's points from its bone (metres): torso parts are wide.
@@ -144,10 +168,9 @@ def assess(
             unexplained,
             meas,
         )
-    limbs = [_J[n] for n in _J if n.endswith(("elbow", "hand", "knee", "foot"))]
-    gaps = np.sqrt(((joints[limbs, None, :] - points[None, :, :]) ** 2).sum(-1).min(axis=1))
+    gaps = _joint_gaps(np.asarray(points, dtype=float), joints[_LIMBS])
     if gaps.max() > max_joint_gap * (height / 1.75):
-        worst = list(_J)[limbs[int(np.argmax(gaps))]]
+        worst = _LIMB_NAMES[int(np.argmax(gaps))]
         return Health(
             False,
             f"the {worst} is {100 * gaps.max():.0f} cm from the body",
