@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Reproduce the tables of docs/RESULTS.md (about 15-20 minutes on 2 cores).
+# Reproduce the tables of docs/RESULTS.md (about 15 minutes on 2 cores).
 # Usage: bash benchmarks/results.sh [OUT_DIR]   (needs ../shared/data or $POSEDRIFT_DATA)
 set -euo pipefail
 here="$(cd "$(dirname "$0")/.." && pwd)"
@@ -34,3 +34,5 @@ echo "500 frames, $methods,cpd-paper: $(( $(date +%s) - start )) s wall" | tee "
 seqs=$(for a in $(seq 1 27); do printf "a%d_s%d_t1," "$a" $(( a % 4 + 1 )); done)
 posedrift -q eval utd "$data/utd-mhad" --sequences "${seqs%,}" --methods "$methods" \
     --json "$out/utd.json" | tee "$out/utd.md"
+# Speed of the tracker, per stage, one core.
+posedrift -q bench track --frames 300 --repeats 3 --json "$out/bench_track.json" | tee "$out/bench_track.md"

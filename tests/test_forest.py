@@ -372,6 +372,9 @@ def test_cli_train_is_reproducible(tmp_path):
     np.testing.assert_array_equal(a.threshold, b.threshold)
     np.testing.assert_array_equal(a.offsets, b.offsets)
     assert a.metadata["procedural_share"] == 1.0 and a.metadata["seed"] == 0
+    assert a.metadata["wide_share"] == 0.3 and a.metadata["wide_yaw"] == 100.0
+    result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "c.npz"), "--wide-yaw", "200"])
+    assert result.exit_code == 2 and "--wide-yaw" in result.output
 
 
 def test_training_frames_are_seeded_and_show_a_person():

@@ -53,12 +53,28 @@ def train(
         float,
         typer.Option("--procedural-share", min=0.0, max=1.0, help="Share of procedural poses."),
     ] = 0.2,
+    wide_share: Annotated[
+        float,
+        typer.Option(
+            "--wide-share",
+            min=0.0,
+            max=1.0,
+            help="Share of frames from wide views (nearer or farther, off-axis, turned).",
+        ),
+    ] = 0.3,
+    wide_yaw: Annotated[
+        float,
+        typer.Option(
+            "--wide-yaw", min=0.0, max=180.0, help="Largest turn of the wide views, degrees."
+        ),
+    ] = 100.0,
 ) -> None:
     """Train a body-part forest on rendered synthetic depth frames (needs scikit-learn).
 
     Poses come from the BVH clips (all but the held-out ones) and the procedural
     motion, bodies of varied height, girth and build, views within 45 degrees of
-    frontal at 2-3.5 m, Kinect-like noise on half of the frames.
+    frontal at 2-3.5 m and (--wide-share of the frames) wider views up to --wide-yaw
+    degrees from frontal at 1-4.5 m, Kinect-like noise on half of the frames.
 
     Example: posedrift train --frames 2000 --seed 0 --out forest.npz
     """
@@ -85,7 +101,10 @@ def train(
         n_clips = len(motions) - 1
         share = procedural_share if n_clips else 1.0
         weights = [(1.0 - share) / max(n_clips, 1)] * n_clips + [share]
-        generator = tr.synthetic_training_frames(frames, motions, weights=weights, rng=render_rng)
+        ranges = tr.SceneRanges(wide_fraction=wide_share, wide_yaw=wide_yaw)
+        generator = tr.synthetic_training_frames(
+            frames, motions, ranges=ranges, weights=weights, rng=render_rng
+        )
         metadata = {
             "command": "posedrift train",
             "seed": seed,
@@ -93,6 +112,8 @@ def train(
             "clips": [p.name for p in paths],
             "excluded": exclude,
             "procedural_share": share,
+            "wide_share": wide_share,
+            "wide_yaw": wide_yaw,
         }
         with tr._progress(progress_enabled(), "rendering + features", frames) as advance:
             forest = tr.train_forest(
