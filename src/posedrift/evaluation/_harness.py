@@ -361,6 +361,17 @@ def _by_view(angles: np.ndarray, ref_angles: np.ndarray, yaw: np.ndarray) -> dic
     return out
 
 
+def _sequence_summary(joints: np.ndarray, reference: Reference) -> dict:
+    """One method's errors on one sequence (the JSON's ``per_sequence`` entries)."""
+    angles = joint_angles(joints)
+    return {
+        "angle_error_mean_deg": _round(angle_errors(angles, reference.angles)["mean"]),
+        "mpjpe_mm": _round(mpjpe_mm(joints, reference.joints), 2),
+        "failed_frames": int(np.count_nonzero(failed_frames(joints))),
+        **_drift(angles, reference.angles),
+    }
+
+
 def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
     """The JSON of ``posedrift eval`` (``METHOD.md`` section 6) from a run.
 
@@ -415,14 +426,7 @@ def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
                 "map_10cm": _round(map_at(filled, ref, 0.10)),
             },
             "per_sequence": {
-                s.name: {
-                    "angle_error_mean_deg": _round(
-                        angle_errors(joint_angles(j), s.reference.angles)["mean"]
-                    ),
-                    "mpjpe_mm": _round(mpjpe_mm(j, s.reference.joints), 2),
-                    "failed_frames": int(np.count_nonzero(failed_frames(j))),
-                    **_drift(joint_angles(j), s.reference.angles),
-                }
+                s.name: _sequence_summary(j, s.reference)
                 for s, j in zip(run.sequences, converted, strict=True)
             },
             "method_errors": sum(len(r.errors) for r in per),
