@@ -22,7 +22,7 @@ posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 --noise --m
     --json "$out/table1_noise.json" | tee "$out/table1_noise.md"
 # Ablations of the tracker.
 posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 \
-    --methods cpd,cpd-paper,cpd-norelabel,cpd-rigid,cpd-cold,cpd-200,cpd-800 \
+    --methods cpd,cpd-paper,icp-paper,cpd-norelabel,cpd-rigid,cpd-cold,cpd-200,cpd-800 \
     --json "$out/ablations.json" --no-paper | tee "$out/ablations.md"
 # Drift (first / last 100 frames per sequence in the JSON), and the time of a full
 # 500-frame, four-method run.

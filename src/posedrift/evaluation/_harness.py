@@ -68,6 +68,10 @@ METHODS: dict[str, tuple[str, MethodFactory]] = {
         "ablation: the paper's pure tracking, no per-frame forest evidence",
         _tracker(appearance_weight=0.0),
     ),
+    "icp-paper": (
+        "ablation: the pure tracking with ICP correspondences, no per-frame forest evidence",
+        _tracker(correspondence="icp", appearance_weight=0.0),
+    ),
     "cpd-norelabel": ("ablation: no geodesic relabelling", _tracker(relabel=False)),
     "cpd-rigid": ("ablation: rigid instead of nonrigid CPD", _tracker(registration="rigid")),
     "cpd-cold": ("ablation: no warm start of CPD", _tracker(warm_start=False)),
