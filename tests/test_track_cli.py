@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from posedrift.cli import app
 from posedrift.io import read_poses
-from posedrift.skeleton import ANGLE_NAMES, JOINT_NAMES
+from posedrift.skeleton import ANGLE_NAMES, JOINT_NAMES, to_convention
 from posedrift.synthetic import build_sequence, procedural_motion
 
 runner = CliRunner()
@@ -47,6 +47,23 @@ def test_track_png_folder_writes_every_output(sequence, tmp_path):
     error = np.linalg.norm(est - sequence.reference.joints, axis=-1)
     assert np.median(error) < 0.10
     assert len(read_poses(out / "poses.csv")) == len(sequence.frames)
+    assert data["joint_convention"] == "native"
+    # In the Kinect convention every output holds the moved joints, and says so.
+    kinect = tmp_path / "kinect"
+    result = runner.invoke(
+        app,
+        ["-q", "track", str(tmp_path / "rec"), "--out", str(kinect), "--no-video"]
+        + ["--convention", "kinect"],
+    )
+    assert result.exit_code == 0, result.output
+    moved = json.loads((kinect / "poses.json").read_text())
+    assert moved["joint_convention"] == "kinect"
+    moved_joints = np.array([f["joints"] for f in moved["frames"]], dtype=float)
+    np.testing.assert_allclose(moved_joints, to_convention(est, "kinect"), atol=1e-9)
+    csv_joints = np.array([r["joints"] for r in read_poses(kinect / "poses.csv")], dtype=float)
+    np.testing.assert_allclose(csv_joints, moved_joints, atol=1e-6)
+    bad = runner.invoke(app, ["track", str(tmp_path / "rec"), "--out", "o", "--convention", "x"])
+    assert bad.exit_code != 0 and "Unknown --convention 'x'" in bad.output
 
 
 def test_track_corrupt_frame_is_named_and_the_rest_processed(sequence, tmp_path):

@@ -33,6 +33,7 @@ def write_outputs(
     plots: bool = True,
     body: bool = True,
     stride: int | None = None,
+    joint_convention: str = "native",
 ) -> dict[str, Path]:
     """Write poses (JSON, CSV, BVH), the animation, the viewer and the angle plot.
 
@@ -43,7 +44,9 @@ def write_outputs(
     from posedrift.io import write_poses
 
     out.mkdir(parents=True, exist_ok=True)
-    written = dict(write_poses(results, out, intrinsics=intrinsics, fps=fps))
+    written = dict(
+        write_poses(results, out, intrinsics=intrinsics, fps=fps, joint_convention=joint_convention)
+    )
     stride = stride or video_stride(len(results))
     jobs = []
     if plots:

@@ -43,12 +43,23 @@ def track(
         str | None,
         typer.Option("--point-clouds", help="Also write labelled points per frame: npz or ply."),
     ] = None,
+    convention: Annotated[
+        str,
+        typer.Option(
+            "--convention",
+            help="Joints as recovered (native) or moved to where the Kinect v1 SDK puts them "
+            "(kinect; fixed offsets fitted on UTD-MHAD).",
+        ),
+    ] = "native",
 ) -> None:
     """Recover the pose in every frame of a depth recording.
 
     Writes OUT/poses.json, poses.csv, poses.bvh, angles.png, tracking.gif and
-    viewer.html. Exit status 1 when a frame could not be read (the others are
-    still processed and written), 2 for unusable input or options.
+    viewer.html. With --convention kinect, every output holds the joints moved to
+    the Kinect SDK's skeleton convention (posedrift.skeleton.to_convention), for
+    comparison with Kinect-based tools. Exit status 1 when a frame could not be
+    read (the others are still processed and written), 2 for unusable input or
+    options.
 
     Example: posedrift track recording/ --out poses/ --camera kinect1-vga
     """
@@ -56,10 +67,15 @@ def track(
 
     from posedrift.cli._outputs import video_stride, write_outputs
     from posedrift.io import UnreadableFrame, open_depth_source
+    from posedrift.skeleton import CONVENTIONS
     from posedrift.tracking import FrameResult, FrameStatus, PoseTracker
 
     if point_clouds not in (None, "npz", "ply"):
         raise fail(f"--point-clouds must be 'npz' or 'ply'. Got {point_clouds!r}.")
+    if convention not in CONVENTIONS:
+        raise fail(
+            f"Unknown --convention {convention!r}: expected one of {', '.join(CONVENTIONS)}."
+        )
     try:
         reader = open_depth_source(
             source,
@@ -96,6 +112,7 @@ def track(
                 bar.advance(task)
     finally:  # whatever was processed is written, even after an interruption
         if results:
+            results = _in_convention(results, convention)
             written = write_outputs(
                 results,
                 frames,
@@ -105,6 +122,7 @@ def track(
                 video=video,
                 viewer=viewer,
                 stride=stride,
+                joint_convention=convention,
             )
             if point_clouds:
                 from posedrift.io import write_point_clouds
@@ -113,6 +131,17 @@ def track(
     _summary(results, seconds, written)
     if unreadable:
         raise typer.Exit(EXIT_UNREADABLE_FRAMES)
+
+
+def _in_convention(results: list, convention: str) -> list:
+    """The results with their joints moved to ``convention`` (unchanged for native)."""
+    if convention == "native":
+        return results
+    from dataclasses import replace
+
+    from posedrift.skeleton import to_convention
+
+    return [replace(r, joints=to_convention(r.joints, convention)) for r in results]
 
 
 def _summary(results, seconds: float, written: dict) -> None:

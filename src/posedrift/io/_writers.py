@@ -62,6 +62,7 @@ def write_poses(
     *,
     intrinsics: Intrinsics,
     fps: float | None = None,
+    joint_convention: str = "native",
 ) -> dict[str, Path]:
     """Write ``poses.json``, ``poses.csv`` and ``poses.bvh`` for a tracked sequence.
 
@@ -76,6 +77,10 @@ def write_poses(
     fps : float, optional
         Frame rate of the BVH (and the JSON's ``fps``); by default from the
         results' timestamps, else 30.
+    joint_convention : str
+        The skeleton convention the results' joints are in, recorded in
+        ``poses.json`` (``"native"``, or e.g. ``"kinect"`` after
+        :func:`posedrift.skeleton.to_convention`); the joints are written as given.
 
     Returns
     -------
@@ -87,9 +92,9 @@ def write_poses(
     -----
     ``poses.json`` is the METHOD section 6 schema (``intrinsics``, ``joint_names``,
     ``angle_names``, ``frames`` with :meth:`FrameResult.to_json` objects) plus
-    ``fps`` and, per frame, ``bvh_pose``: ``"recovered"`` where the BVH frame holds
-    this frame's pose, ``"held"`` where the frame had no complete pose and the BVH
-    repeats the last known one. Joints are metres in the camera frame.
+    ``fps``, ``joint_convention`` and, per frame, ``bvh_pose``: ``"recovered"`` where
+    the BVH frame holds this frame's pose, ``"held"`` where the frame had no complete
+    pose and the BVH repeats the last known one. Joints are metres in the camera frame.
 
     Examples
     --------
@@ -139,6 +144,7 @@ def write_poses(
     document = {
         "intrinsics": intrinsics.to_dict(),
         "fps": rate,
+        "joint_convention": joint_convention,
         "joint_names": list(JOINT_NAMES),
         "angle_names": list(ANGLE_NAMES),
         "frames": frames,
