@@ -309,12 +309,17 @@ def _ref_fit_skeleton(
                 if np.isfinite(to_ring).all():
                     direction = _ref_unit(w_axis * direction + w_ring * to_ring)
         if np.isfinite(direction).all():
-            joints[ij] = blend(ij, anchor + length * direction)
+            value = anchor + length * direction
+            if smoothing > 0 and pred is not None and np.isfinite(pred[ij]).all():
+                value = (1.0 - smoothing) * value + smoothing * pred[ij]
+                value = anchor + length * _ref_unit(value - anchor)
+            joints[ij] = value
             conf[ij] = conf[ia] * min(1.0, counts[part] / 8.0)
             measured[ij] = measured[ia]
         elif pred is not None and np.isfinite(pred[ij]).all():
-            if np.isfinite(anchor).all() and np.isfinite(pred[ia]).all():
-                d = _ref_unit(pred[ij] - pred[ia])
+            if np.isfinite(anchor).all():
+                base = pred[ia] if np.isfinite(pred[ia]).all() else anchor
+                d = _ref_unit(pred[ij] - base)
                 joints[ij] = anchor + length * d if np.isfinite(d).all() else pred[ij]
             else:
                 joints[ij] = pred[ij]

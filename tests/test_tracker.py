@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from posedrift.camera import DepthFrame, camera_preset
-from posedrift.skeleton import joint_angles
+from posedrift.skeleton import JOINT_NAMES, JOINT_PARENTS, joint_angles
 from posedrift.tracking import FrameResult, FrameStatus, PoseTracker
 
 K = camera_preset("kinect1-qvga")
@@ -77,6 +77,17 @@ def test_tracks_a_synthetic_sequence(sequence):
         assert set(r.timings_ms) >= {"segment", "points", "total"}
         assert len(r.points) == len(r.labels) == 400
         assert not r.joints.flags.writeable
+
+
+def test_limb_bones_keep_their_calibrated_lengths(sequence):
+    """Temporal smoothing and fallbacks turn limb bones, never stretch them (BVH export)."""
+    tracker = PoseTracker(K, forest=LabelImages(sequence))
+    joints = np.array([r.joints for r in _run(tracker, sequence.frames[:40:2])])
+    calibrated = tracker.calibration.bone_lengths
+    for child in ("right_elbow", "left_hand", "right_knee", "left_foot", "right_hand"):
+        i = JOINT_NAMES.index(child)
+        lengths = np.linalg.norm(joints[:, i] - joints[:, JOINT_PARENTS[i]], axis=1)
+        np.testing.assert_allclose(lengths, calibrated[i], atol=1e-6)  # metres
 
 
 def _bad_frames(index):

@@ -376,6 +376,10 @@ def _place_limbs(
     if smoothing > 0 and pred is not None:
         smooth = placed & _rows_finite(pred[ij])
         value[smooth] = (1.0 - smoothing) * value[smooth] + smoothing * pred[ij][smooth]
+        # Smoothing turns the bone, never stretches it: back to its length.
+        value[smooth] = anchor[smooth] + lengths[smooth, None] * _units(
+            value[smooth] - anchor[smooth]
+        )
     joints[ij[placed]] = value[placed]
     conf[ij[placed]] = (conf[ia] * np.minimum(1.0, counts[part] / 8.0))[placed]
     measured[ij[placed]] = measured[ia[placed]]
@@ -385,8 +389,8 @@ def _place_limbs(
         a, j = ia[k], ij[k]
         if not _finite(pred[j]):
             continue
-        if _finite(anchor[k]) and _finite(pred[a]):
-            d = _unit(pred[j] - pred[a])
+        if _finite(anchor[k]):
+            d = _unit(pred[j] - (pred[a] if _finite(pred[a]) else anchor[k]))
             joints[j] = anchor[k] + lengths[k] * d if _finite(d) else pred[j]
         else:
             joints[j] = pred[j]
