@@ -71,3 +71,22 @@ def test_cli_bench_cpd_rejects_bad_sizes():
     result = CliRunner().invoke(app, ["bench", "cpd", "--sizes", "abc"])
     assert result.exit_code != 0
     assert "--sizes" in result.output
+
+
+def test_cli_bench_cpd_rejects_unknown_impls(monkeypatch):
+    def no_work(*args, **kwargs):
+        raise AssertionError("unknown --impls must be rejected before any work")
+
+    monkeypatch.setattr(_cpd, "run_cpd_benchmark", no_work)
+    result = CliRunner().invoke(
+        app, ["bench", "cpd", "--impls", "posedrift,foo", "--sizes", "50", "--repeats", "1"]
+    )
+    assert result.exit_code == 2
+    assert "--impls foo: no such implementation at --sizes 50. Known at these sizes: " in (
+        result.stderr
+    )
+    known = result.stderr.split("Known at these sizes: ")[1].rstrip(".\n").split(", ")
+    assert known == list(_cpd.implementations(50))
+    assert "posedrift-scaled-smoothness" not in known  # only above 400 points
+    result = CliRunner().invoke(app, ["bench", "cpd", "--impls", ",", "--sizes", "50"])
+    assert result.exit_code == 2 and "--impls ',' names no implementation" in result.stderr

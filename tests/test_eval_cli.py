@@ -247,3 +247,148 @@ def test_figures_are_written(tmp_path):
     crossed[[6, 7]] = crossed[[7, 6]]
     scores = crossing_scores(np.stack([truth, crossed]))
     assert scores[1] > scores[0] + 0.5
+
+
+# --- eval labels: bad frames are named and skipped, the rest still evaluated -----------------
+
+
+@pytest.fixture
+def label_folder(tmp_path):
+    """An 8-frame synth folder with frames 2-7 broken in six different ways."""
+    import imageio.v3 as iio
+
+    folder = tmp_path / "s3"
+    result = CliRunner().invoke(app, ["-q", "synth", "builtin", "--out", str(folder), "-n", "8"])
+    assert result.exit_code == 0, result.output
+    (folder / "labels" / "000002.png").write_text("x\n")  # not an image (struct.error before)
+    (folder / "depth" / "000003.png").write_bytes(b"")  # zero bytes
+    (folder / "labels" / "000004.png").unlink()  # missing
+    iio.imwrite(folder / "depth" / "000005.png", np.zeros((10, 10), np.uint16))  # wrong size
+    iio.imwrite(folder / "depth" / "000006.png", np.zeros((240, 320), np.uint8))  # 8-bit depth
+    labels = iio.imread(folder / "labels" / "000007.png")
+    labels[0, 0] = 20
+    iio.imwrite(folder / "labels" / "000007.png", labels)  # no part 19
+    return folder
+
+
+BAD_FRAMES = {
+    "000002.png": "labels/000002.png is not an image file",
+    "000003.png": "depth/000003.png is empty (0 bytes)",
+    "000004.png": "labels/000004.png is missing",
+    "000005.png": "depth/000005.png is 10 x 10 pixels; ground_truth.json says 320 x 240",
+    "000006.png": "depth/000006.png is not a 16-bit (millimetres) greyscale PNG: read uint8 "
+    "of shape (240, 320)",
+    "000007.png": "labels/000007.png holds 20; labels are 0..15",
+}
+
+
+def test_read_label_folder_skips_bad_frames(label_folder):
+    from posedrift.labelling._train import read_label_folder
+
+    skipped = []
+    frames = list(read_label_folder(label_folder, on_skip=lambda *a: skipped.append(a)))
+    assert [name for name, _ in frames] == ["000000.png", "000001.png"]
+    assert dict(skipped) == BAD_FRAMES
+    assert frames[0][1].labels.dtype == np.uint8 and frames[0][1].depth.shape == (240, 320)
+    # Without on_skip: one RuntimeWarning per frame, naming the folder and the frame.
+    with pytest.warns(RuntimeWarning) as caught:
+        names = [name for name, _ in read_label_folder(label_folder)]
+    assert names == ["000000.png", "000001.png"]
+    assert [str(w.message) for w in caught] == [
+        f"{label_folder}: skipped frame {name}: {why}" for name, why in BAD_FRAMES.items()
+    ]
+
+
+def test_eval_labels_cli_evaluates_the_rest_and_exits_1(label_folder, tmp_path):
+    out = tmp_path / "e.json"
+    result = CliRunner().invoke(
+        app, ["-q", "eval", "labels", str(label_folder), "--json", str(out)]
+    )
+    assert result.exit_code == 1, result.output
+    assert "Traceback" not in result.output
+    data = json.loads(out.read_text())
+    assert data["frames"] == 2 and 0.5 < data["pixel_accuracy"] <= 1.0
+    assert data["skipped"] == [{"frame": n, "reason": r} for n, r in BAD_FRAMES.items()]
+    lines = result.stderr.splitlines()
+    for name, why in BAD_FRAMES.items():  # each reported once, naming the frame and the file
+        assert [line for line in lines if name in line] == [
+            f"error: {label_folder}: skipped frame {name}: {why}"
+        ]
+    assert "over 2 frames (6 skipped)" in result.stdout
+
+
+def test_eval_labels_cli_every_frame_bad(label_folder, tmp_path):
+    for name in ("000000.png", "000001.png"):
+        (label_folder / "depth" / name).write_bytes(b"")
+    out = tmp_path / "e.json"
+    result = CliRunner().invoke(
+        app, ["-q", "eval", "labels", str(label_folder), "--json", str(out)]
+    )
+    assert result.exit_code == 1
+    assert "nothing to evaluate: every frame of" in result.stderr
+    data = json.loads(out.read_text())
+    assert data["frames"] == 0 and data["pixel_accuracy"] is None and len(data["skipped"]) == 8
+
+
+# --- eval synthetic: sources named once, the missing file said, every method in --help -------
+
+UNMAPPABLE_BVH = """HIERARCHY
+ROOT node0
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT node1
+  {
+    OFFSET 0 10 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    End Site
+    {
+      OFFSET 0 10 0
+    }
+  }
+}
+MOTION
+Frames: 2
+Frame Time: 0.0333333
+0 90 0 0 0 0 0 0 0
+0 90 0 0 0 0 0 0 0
+"""
+
+
+def test_eval_synthetic_names_each_skipped_source_once(tmp_path):
+    missing = tmp_path / "nosuch.bvh"
+    renamed = tmp_path / "renamed.bvh"
+    renamed.write_text(UNMAPPABLE_BVH)
+    out = tmp_path / "r.json"
+    result = CliRunner().invoke(
+        app,
+        ["-q", "eval", "synthetic", str(missing), str(renamed), "--frames", "3"]
+        + ["--methods", "shotton", "--json", str(out)],
+    )
+    assert result.exit_code == 1, result.output
+    lines = [line for line in result.stderr.splitlines() if line.startswith("error: skipped")]
+    assert len(lines) == 2
+    assert (
+        lines[0] == f"error: skipped {missing}: no such file (SOURCE is a BVH file or 'builtin')."
+    )
+    assert lines[1].startswith(f"error: skipped {renamed}: cannot map the skeleton")
+    assert lines[0].count(missing.name) == 1 and lines[1].count(renamed.name) == 1
+    # The command line has no rig option: say what to do there instead.
+    assert "Pass rig=" not in result.stderr
+    assert "Rename the file's joints to the names looked for" in lines[1]
+    assert "bvh_motion(path, rig={joint name: node name})" in lines[1]
+    assert "nothing to evaluate: every sequence was skipped" in result.stderr
+    data = json.loads(out.read_text())
+    assert [s["sequence"] for s in data["skipped"]] == [str(missing), str(renamed)]
+    assert "no such file" in data["skipped"][0]["reason"]
+
+
+def test_methods_help_lists_every_method():
+    from posedrift.cli._eval import _METHODS_HELP
+
+    named = set(_METHODS_HELP.replace(",", " ").replace(".", " ").split())
+    assert set(harness.METHODS) <= named
+    for command in ("synthetic", "utd"):
+        result = CliRunner().invoke(app, ["eval", command, "--help"], env={"COLUMNS": "300"})
+        assert result.exit_code == 0
+        assert "cpd-paper" in result.output and "icp-paper" in result.output

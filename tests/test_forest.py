@@ -443,3 +443,31 @@ def test_fast_descents_reach_the_same_leaves(toy_forest, monkeypatch):
                 320,
                 np.empty(3, np.int32),
             )
+
+
+def test_diverse_frames_drop_near_duplicate_poses():
+    from posedrift.labelling._train import diverse_frames, pose_descriptors
+    from posedrift.skeleton import t_pose_joints
+    from posedrift.synthetic import Motion, procedural_motion
+
+    # Identity: a still motion is one pose; the same pose turned and moved is too.
+    still = np.stack([t_pose_joints(1.75)] * 20)
+    turn = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])  # 90 deg about +Y
+    turned = still @ turn.T + [2.0, 0.0, 1.0]
+    kept = diverse_frames([Motion(still), Motion(turned)], 0.01)
+    assert sum(len(k) for k in kept) == 1
+
+    motion = procedural_motion(seconds=4.0, fps=30.0)
+    desc = pose_descriptors(motion.joints, 1.75).reshape(len(motion.joints), -1, 3)
+    for d in (0.03, 0.1):
+        [frames] = diverse_frames([motion], d, rng=1)
+        gap = np.linalg.norm(desc[:, None] - desc[None, frames], axis=-1).max(axis=-1)  # (T, K)
+        # Every kept pair differs by more than d at some joint; every dropped pose has a
+        # kept one within d at every joint.
+        pairs = gap[frames] + np.diag(np.full(len(frames), np.inf))
+        assert pairs.min() > d
+        assert np.all(gap.min(axis=1) <= d)
+    assert len(diverse_frames([motion], 0.1)[0]) < len(diverse_frames([motion], 0.03)[0])
+    # At 0 only exact repeats go (the procedural motion holds its T-pose for a while).
+    n_distinct = len(np.unique(desc.reshape(len(desc), -1), axis=0))
+    assert len(diverse_frames([motion], 0.0)[0]) == n_distinct < len(motion.joints)

@@ -83,6 +83,33 @@ def test_synth_layout_depth_subfolder(tmp_path):
     assert len(source) == 2 and source.path.name == "depth"
 
 
+def test_synth_folder_reads_depth_not_the_contact_sheet_and_its_camera(tmp_path):
+    """A ``posedrift synth`` folder: an 8-bit RGB contact sheet on top, frames in depth/."""
+    import json
+
+    root = tmp_path / "s1"
+    stack = _depth_stack(3, (480, 640))
+    _write_png_folder(root / "depth", stack)
+    Image.fromarray(np.zeros((40, 60, 3), np.uint8)).save(root / "contact_sheet.png")
+    d435 = {"fx": 385.0, "fy": 385.0, "cx": 320.0, "cy": 240.0, "width": 640, "height": 480}
+    (root / "ground_truth.json").write_text(json.dumps({"intrinsics": d435, "fps": 15.0}))
+    source = open_depth_source(root)
+    assert source.path == root / "depth" and len(source) == 3
+    # the camera synth rendered with (d435), not the 640 x 480 default (kinect1-vga, 571.26)
+    assert source.intrinsics == Intrinsics(**d435)
+    frames = list(source)
+    assert all(isinstance(f, DepthFrame) for f in frames)
+    np.testing.assert_allclose(frames[2].depth, stack[2] / 1000.0, atol=1e-6)
+    assert frames[2].depth[100, 150] == pytest.approx(2.802)  # metres
+    np.testing.assert_allclose([f.timestamp for f in frames], [0.0, 1 / 15, 2 / 15])
+    # an explicit camera still wins over ground_truth.json
+    assert open_depth_source(root, camera="kinect1-vga").intrinsics.fx == pytest.approx(571.26)
+    # a malformed ground_truth.json is ignored: the frames are still read, camera by size
+    (root / "ground_truth.json").write_text("{not json")
+    fallback = open_depth_source(root)
+    assert len(fallback) == 3 and fallback.intrinsics.fx == pytest.approx(571.26)
+
+
 def test_default_intrinsics_by_size_logs_notice(tmp_path, caplog):
     np.save(tmp_path / "vga.npy", _depth_stack(1, (480, 640)))
     with caplog.at_level(logging.INFO, logger="posedrift.io"):
@@ -251,6 +278,19 @@ def test_mat_in_utd_layout(tmp_path):
     savemat(tmp_path / "other.mat", {"d_skel": np.zeros((20, 3, 2))})
     with pytest.raises(ValueError, match=r"other\.mat.*'d_depth'.*Variables found: d_skel"):
         open_depth_source(tmp_path / "other.mat")
+
+
+def test_truncated_mat_names_the_file(tmp_path):
+    from scipy.io import savemat
+
+    whole = tmp_path / "whole.mat"
+    savemat(whole, {"d_depth": np.moveaxis(_depth_stack(3), 0, -1)})
+    data = whole.read_bytes()
+    for keep in (2000, 100):  # header readable but data cut / header cut
+        cut = tmp_path / f"a1_s1_t1_cut{keep}.mat"
+        cut.write_bytes(data[:keep])
+        with pytest.raises(ValueError, match=rf"MATLAB file '.*a1_s1_t1_cut{keep}\.mat'"):
+            open_depth_source(cut)
 
 
 def test_unmirror_mirrors_the_geometry(tmp_path):

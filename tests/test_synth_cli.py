@@ -108,27 +108,115 @@ def test_synth_a_bvh_clip(mocap_dir, tmp_path):
         (["--intrinsics", "1,2,3"], "fx,fy,cx,cy"),
         (["--intrinsics", "285,285,160,120", "--size", "320by240"], "--size"),
         (["--camera", "d435", "--intrinsics", "1,1,1,1"], "either --camera or --intrinsics"),
-        (["--girth", "-1"], "'girth'"),
-        (["--height", "9"], "'stature'"),
+        (["--girth", "-1"], "--girth must be greater than 0. Got -1."),
+        (["--girth", "0"], "--girth must be greater than 0. Got 0."),
+        (["--height", "9"], "--height must be in (0.5, 2.5). Got 9."),
+        (["--height", "-1"], "--height must be in (0.5, 2.5). Got -1."),
+        (["--distance", "0"], "--distance must be greater than 0. Got 0."),
+        (["--fps", "-30"], "--fps must be greater than 0. Got -30."),
+        (["--size", "640x480"], "--size 640x480 goes with --intrinsics: the camera preset"),
+        (["--camera", "d435", "--size", "512x424"], "give --camera kinect2, or --intrinsics"),
     ],
 )
 def test_synth_bad_options_fail_clearly(tmp_path, args, message):
     result = _run("synth", "builtin", "--out", str(tmp_path / "x"), "--frames", "1", *args)
-    assert result.exit_code != 0
-    assert message in result.output
-    assert not (tmp_path / "x" / "ground_truth.json").exists()
+    assert result.exit_code == 2
+    assert message in result.stderr
+    assert "'stature' parameter" not in result.output and "with_shape" not in result.output
+    assert not (tmp_path / "x").exists()
+
+
+def test_synth_size_matching_the_preset_is_accepted(tmp_path):
+    out = tmp_path / "vga"
+    result = _run(
+        "synth", "builtin", "--out", str(out), "-n", "1", "--camera", "d435", "--size", "640x480"
+    )
+    assert result.exit_code == 0, result.output
+    assert read_synthetic(out).frames[0].intrinsics.fx == 385.0
+
+
+def test_synth_person_out_of_view(tmp_path, monkeypatch):
+    # No frame shows the person: fail, write nothing.
+    out = tmp_path / "high"
+    result = _run("synth", "builtin", "--out", str(out), "-n", "3", "--camera-height", "100")
+    assert result.exit_code == 1
+    assert "no frame shows the person" in result.stderr and "--camera-height 100 m" in result.stderr
+    assert not out.exists()
+    # Some frames without the person: written, with a warning that counts them.
+    import dataclasses
+
+    import posedrift.synthetic as synthetic
+
+    build = synthetic.build_sequence
+
+    def blank_frames_1_and_2(*args, **kwargs):
+        seq = build(*args, **kwargs)
+        labels = [
+            np.zeros_like(lab) if i in (1, 2) else lab for i, lab in enumerate(seq.reference.labels)
+        ]
+        return dataclasses.replace(
+            seq, reference=dataclasses.replace(seq.reference, labels=tuple(labels))
+        )
+
+    monkeypatch.setattr(synthetic, "build_sequence", blank_frames_1_and_2)
+    out = tmp_path / "some"
+    result = _run("synth", "builtin", "--out", str(out), "-n", "4")
+    assert result.exit_code == 0, result.output
+    assert "warning: 2 of 4 frames show no person (out of view): frames 1, 2." in result.stderr
+    assert len(read_synthetic(out).frames) == 4
 
 
 def test_synth_bad_source_names_the_file(tmp_path):
     missing = tmp_path / "nothere.bvh"
     result = _run("synth", str(missing), "--out", str(tmp_path / "x"))
-    assert result.exit_code != 0
-    assert "nothere.bvh" in result.output and "neither 'builtin' nor" in result.output
+    assert result.exit_code == 2
+    assert f"error: {missing}: no such file (SOURCE is a BVH file or 'builtin')." in result.stderr
+    result = _run("synth", str(tmp_path), "--out", str(tmp_path / "x"))
+    assert f"error: {tmp_path}: not a file" in result.stderr
     bad = tmp_path / "bad.bvh"
     bad.write_bytes(b"\x00\xffnot a bvh")
     result = _run("synth", str(bad), "--out", str(tmp_path / "x"))
     assert result.exit_code != 0
-    assert "bad.bvh" in result.output and "not a readable BVH" in result.output
+    assert result.stderr.startswith(f"error: {bad}, line 1: a BVH file must start with")
+    assert result.stderr.count("bad.bvh") == 1
+
+
+# Two joints that no known rig names.
+UNMAPPABLE_BVH = """HIERARCHY
+ROOT node0
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT node1
+  {
+    OFFSET 0 10 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    End Site
+    {
+      OFFSET 0 10 0
+    }
+  }
+}
+MOTION
+Frames: 2
+Frame Time: 0.0333333
+0 90 0 0 0 0 0 0 0
+0 90 0 0 0 0 0 0 0
+"""
+
+
+def test_synth_unmappable_rig_says_what_to_do_on_the_command_line(tmp_path):
+    clip = tmp_path / "renamed.bvh"
+    clip.write_text(UNMAPPABLE_BVH)
+    result = _run("synth", str(clip), "--out", str(tmp_path / "x"))
+    assert result.exit_code == 2
+    assert f"error: {clip}: cannot map the skeleton to the 15 joints" in result.stderr
+    assert "The file's joints are: node0, node1." in result.stderr
+    assert "Pass rig=" not in result.stderr
+    assert result.stderr.rstrip().endswith(
+        "Rename the file's joints to the names looked for, or map them in Python: "
+        "posedrift.synthetic.bvh_motion(path, rig={joint name: node name})."
+    )
 
 
 def test_bench_render_reports_both_timings(tmp_path, monkeypatch):

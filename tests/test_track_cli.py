@@ -111,3 +111,148 @@ def test_demo_runs_and_writes_its_outputs(tmp_path):
     for name in ("poses.json", "angles.png", "tracking.gif", "viewer.html"):
         assert (out / name).stat().st_size > 0, name
     assert len(list((out / "figures").glob("*.png"))) == 3
+
+
+def test_track_and_view_a_synth_folder(sequence, tmp_path):
+    """The documented ``posedrift synth ... --out s1 && posedrift track s1`` works."""
+    from posedrift.synthetic import contact_sheet, write_synthetic
+
+    synth = tmp_path / "s1"
+    write_synthetic(sequence, synth)
+    contact_sheet(sequence, synth / "contact_sheet.png")  # 8-bit RGB beside depth/
+    out = tmp_path / "p1"
+    result = runner.invoke(
+        app,
+        ["-q", "track", str(synth), "--out", str(out), "--no-video", "--no-viewer"]
+        + ["--point-clouds", "ply"],
+    )
+    assert result.exit_code == 0, result.output
+    data = json.loads((out / "poses.json").read_text())
+    assert len(data["frames"]) == len(sequence.frames)
+    est = np.array([f["joints"] for f in data["frames"]], dtype=float)
+    error = np.linalg.norm(est - sequence.reference.joints, axis=-1)
+    assert np.median(error) < 0.10  # metres
+    # the point clouds are summarised as a folder and a count, not a Python list
+    assert f"points: {len(sequence.frames)} files in {out / 'points'}" in result.output
+    assert "PosixPath" not in result.output and "[" not in result.output
+    assert len(list((out / "points").glob("*.ply"))) == len(sequence.frames)
+    view = runner.invoke(app, ["-q", "view", str(synth)])
+    assert view.exit_code == 0, view.output
+    assert f"{synth / 'depth'} (PngFolderSource)" in view.output
+    assert f"{len(sequence.frames)} ({len(sequence.frames)} readable, 0 unreadable)" in view.output
+
+
+def test_unusable_out_fails_up_front_naming_option_and_path(tmp_path, monkeypatch):
+    import posedrift.io
+    import posedrift.synthetic
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the input was read before the output path was checked")
+
+    monkeypatch.setattr(posedrift.io, "open_depth_source", no_work)
+    monkeypatch.setattr(posedrift.synthetic, "build_sequence", no_work)
+    afile = tmp_path / "afile"
+    afile.write_text("keep me")
+    stack = str(tmp_path / "x.npy")
+    cases = [
+        (["track", stack, "--out", str(afile)], f"--out '{afile}' is an existing file"),
+        (["track", stack, "--out", str(afile / "sub")], f"'{afile}' is a file, not a folder"),
+        (["demo", "--out", str(afile)], f"--out '{afile}' is an existing file"),
+        (["view", stack, "--out", str(afile / "x.gif")], f"'{afile}' is a file, not a folder"),
+        (["view", stack, "--out", str(tmp_path / "bad.txt")], "must end in .gif or .mp4"),
+        (["view", stack, "--out", str(tmp_path / "d.gif")], "is a folder, not a file"),
+    ]
+    (tmp_path / "d.gif").mkdir()
+    for args, message in cases:
+        result = runner.invoke(app, ["-q", *args])
+        assert result.exit_code == 2, (args, result.output)
+        assert message in result.output, (args, result.output)
+        assert isinstance(result.exception, SystemExit)  # a usage error, no traceback
+    assert afile.read_text() == "keep me"
+    assert not (tmp_path / "bad.txt").exists()
+
+
+def test_check_output_helpers(tmp_path):
+    import os
+
+    import typer
+
+    from posedrift.cli._outputs import check_output_dir, check_output_file
+
+    assert check_output_dir(tmp_path / "new" / "deeper", "--out") == tmp_path / "new" / "deeper"
+    assert not (tmp_path / "new").exists()  # checked, not created
+    assert check_output_dir(tmp_path, "--out") == tmp_path
+    assert check_output_file(tmp_path / "a.GIF", "--json", suffixes=(".gif",)) == tmp_path / "a.GIF"
+    (tmp_path / "f").write_text("")
+    for check, path, option in [
+        (check_output_dir, tmp_path / "f", "--out"),
+        (check_output_dir, tmp_path / "f" / "x", "--figures"),
+        (check_output_file, tmp_path / "f" / "r.json", "--json"),
+        (check_output_file, tmp_path, "--json"),
+    ]:
+        with pytest.raises(typer.Exit) as info:
+            check(path, option)
+        assert info.value.exit_code == 2
+    if os.geteuid() != 0:  # root may write anywhere
+        locked = tmp_path / "locked"
+        locked.mkdir(mode=0o500)
+        with pytest.raises(typer.Exit):
+            check_output_dir(locked / "out", "--out")
+
+
+def test_all_nan_depth_is_reported_plainly(tmp_path):
+    nan = tmp_path / "nan.npy"
+    np.save(nan, np.full((3, 240, 320), np.nan, np.float32))
+    negative = tmp_path / "neg.npy"
+    np.save(negative, -np.ones((2, 240, 320)))
+    for path in (nan, negative):
+        view = runner.invoke(app, ["-q", "view", str(path)])
+        assert view.exit_code == 2, view.output  # not usable, as an input that cannot be opened
+        assert "no frame has valid depth" in view.output
+        assert "inf" not in view.output
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["-q", "track", str(nan), "--out", str(out), "--no-video"])
+    assert result.exit_code == 0, result.output  # frames without a person are not an error
+    assert "no pose recovered: no frame of" in result.output
+    assert "has valid depth" in result.output
+    frames = json.loads((out / "poses.json").read_text())["frames"]
+    assert [f["status"] for f in frames] == ["no_person"] * 3
+
+
+def test_unreadable_frame_message_names_the_file(tmp_path):
+    rec = tmp_path / "rec"
+    _write_png_folder(build_sequence(procedural_motion(), n_frames=3, name="s"), rec)
+    (rec / "000001.png").write_bytes(b"\x89PNG\r\n\x1a\nnot really a png")
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["-q", "track", str(rec), "--out", str(out), "--no-video"])
+    assert result.exit_code == 1
+    frame = json.loads((out / "poses.json").read_text())["frames"][1]
+    assert frame["status"] == "lost"
+    assert frame["message"].startswith(str(rec / "000001.png"))
+    assert "cannot read this PNG" in frame["message"]
+    row = read_poses(out / "poses.csv")[1]
+    assert row["message"] == frame["message"]
+
+
+def test_interrupted_track_says_so_and_keeps_what_was_done(sequence, tmp_path, monkeypatch):
+    from posedrift.tracking import PoseTracker
+
+    rec = tmp_path / "rec"
+    _write_png_folder(sequence, rec)
+    process = PoseTracker.process
+    calls = []
+
+    def interrupted_at_3(self, frame):
+        calls.append(frame.index)
+        if len(calls) == 4:
+            raise KeyboardInterrupt
+        return process(self, frame)
+
+    monkeypatch.setattr(PoseTracker, "process", interrupted_at_3)
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["-q", "track", str(rec), "--out", str(out), "--no-video"])
+    assert result.exit_code == 130
+    n = len(sequence.frames)
+    assert f"interrupted at frame 3 of {n}" in result.output
+    assert "hold the 3 frames processed so far" in result.output
+    assert [f["index"] for f in json.loads((out / "poses.json").read_text())["frames"]] == [0, 1, 2]

@@ -25,7 +25,11 @@ def bench_cpd_command(
     ] = 400,
     impls: Annotated[
         str | None,
-        typer.Option("--impls", help="Comma-separated implementations to run (default all)."),
+        typer.Option(
+            "--impls",
+            help="Comma-separated implementations to run, e.g. posedrift,pycpd (default all; "
+            "an unknown name lists the known ones).",
+        ),
     ] = None,
     json_out: Annotated[
         Path | None, typer.Option("--json", help="Write the full result as JSON here.")
@@ -45,7 +49,8 @@ def bench_cpd_command(
     """
     import json
 
-    from posedrift.benchmarks._cpd import markdown_table, run_cpd_benchmark
+    from posedrift.benchmarks._cpd import implementations, markdown_table, run_cpd_benchmark
+    from posedrift.cli._outputs import check_output_file
 
     try:
         size_list = [int(s) for s in sizes.split(",") if s.strip()]
@@ -58,6 +63,24 @@ def bench_cpd_command(
         raise fail(f"--sizes must list sizes of at least 10 points. Got {sizes!r}.")
     if any(t is not None and t < 1 for t in thread_list):
         raise fail(f"--threads must be positive or 'all'. Got {threads!r}.")
+    only = None
+    if impls is not None:
+        only = [name.strip() for name in impls.split(",") if name.strip()]
+        # Some implementations exist only at some sizes (exact solves up to 3000 points...).
+        known = list(dict.fromkeys(n for size in size_list for n in implementations(size)))
+        unknown = [name for name in only if name not in known]
+        if unknown or not only:
+            what = (
+                f"{', '.join(unknown)}: no such implementation at --sizes "
+                f"{','.join(map(str, size_list))}"
+                if only
+                else f"{impls!r} names no implementation"
+            )
+            raise fail(f"--impls {what}. Known at these sizes: {', '.join(known)}.")
+    if json_out is not None:
+        check_output_file(json_out, "--json")
+    if markdown_out is not None:
+        check_output_file(markdown_out, "--markdown")
     say = (lambda msg: typer.echo(f"  {msg}", err=True)) if progress_enabled() else None
     report = run_cpd_benchmark(
         size_list,
@@ -66,7 +89,7 @@ def bench_cpd_command(
         rng=seed,
         progress=say,
         frame_points=frame_points,
-        only=None if impls is None else impls.split(","),
+        only=only,
     )
     table = markdown_table(report)
     typer.echo(table)

@@ -40,7 +40,7 @@ def demo(
 
     Example: posedrift demo --out posedrift-demo --frames 300
     """
-    from posedrift.cli._outputs import write_outputs
+    from posedrift.cli._outputs import check_output_dir, write_outputs
     from posedrift.evaluation import markdown_table, parse_methods, run_methods, summarize
     from posedrift.evaluation._figures import write_figures
     from posedrift.synthetic import build_sequence, procedural_motion
@@ -51,6 +51,7 @@ def demo(
         raise fail(str(exc)) from exc
     if "cpd" not in names:
         names.insert(0, "cpd")
+    check_output_dir(out, "--out")
     typer.echo(f"Rendering {frames} frames of the built-in motion ...", err=True)
     sequence = build_sequence(
         procedural_motion(), n_frames=frames, noise=noise, rng=seed, name="builtin"

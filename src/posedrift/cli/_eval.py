@@ -10,7 +10,8 @@ import typer
 from posedrift.cli._app import eval_app, fail, progress_enabled
 
 _METHODS_HELP = (
-    "Comma-separated methods: cpd, shotton, pda, icp, and the ablations cpd-norelabel, "
+    "Comma-separated methods: cpd, shotton, pda, icp, and the ablations cpd-paper, "
+    "icp-paper (the paper's pure tracking, no per-frame forest evidence), cpd-norelabel, "
     "cpd-rigid, cpd-cold, cpd-200, cpd-400, cpd-800."
 )
 
@@ -27,7 +28,21 @@ def _forest(model: Path | None):
         raise fail(str(exc)) from exc
 
 
+def _check_outputs(json_out: Path | None, figures: Path | None) -> None:
+    """Fail now (exit 2), before any work, if --json or --figures cannot be written."""
+    from posedrift.cli._outputs import check_output_dir, check_output_file
+
+    if json_out is not None:
+        check_output_file(json_out, "--json")
+    if figures is not None:
+        check_output_dir(figures, "--figures")
+
+
 def _finish(report: dict, skipped: list[dict], json_out: Path | None, paper: bool) -> None:
+    """Write the JSON, print the table; exit 1 if anything was skipped.
+
+    Each skip was reported when it happened; only their count is repeated here.
+    """
     import json
 
     from posedrift.evaluation import markdown_table
@@ -37,23 +52,9 @@ def _finish(report: dict, skipped: list[dict], json_out: Path | None, paper: boo
         json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(report, indent=2) + "\n")
     typer.echo(markdown_table(report, paper=paper))
-    for item in skipped:
-        typer.echo(f"skipped {item['sequence']}: {item['reason']}", err=True)
     if skipped:
+        typer.echo(f"error: {len(skipped)} sequence(s) skipped (named above)", err=True)
         raise typer.Exit(1)
-
-
-def _load_motion(source: str):
-    from posedrift.synthetic import bvh_motion
-
-    if source == "builtin":
-        from posedrift.synthetic import procedural_motion
-
-        return procedural_motion(fps=30.0)
-    path = Path(source)
-    if not path.is_file():
-        raise ValueError(f"{source!r} is neither 'builtin' nor a BVH file")
-    return bvh_motion(path)
 
 
 @eval_app.command("synthetic")
@@ -106,6 +107,7 @@ def eval_synthetic(
     Example: posedrift eval synthetic builtin ../shared/data/mocap/cmu/002_05.bvh
     --frames 500 --methods cpd,shotton,pda,icp --json table1.json --figures figs
     """
+    from posedrift.cli._synth import _load_source
     from posedrift.evaluation import evaluate, parse_methods
     from posedrift.synthetic import build_sequence
 
@@ -113,19 +115,23 @@ def eval_synthetic(
         names = parse_methods(methods)
     except ValueError as exc:
         raise fail(str(exc)) from exc
+    _check_outputs(json_out, figures)
     sequences, skipped = [], []
     for i, source in enumerate(sources):
         label = Path(source).stem if source != "builtin" else "builtin"
         try:
-            motion = _load_motion(source)
+            motion = _load_source(source)  # its errors start with the file's name
             if progress_enabled():
                 typer.echo(f"rendering {label} ({frames} frames)", err=True)
             seq = build_sequence(
                 motion, n_frames=frames, noise=noise, in_place=in_place, rng=seed + i, name=label
             )
         except (ValueError, OSError, KeyError) as exc:
-            typer.echo(f"error: {source}: {exc}", err=True)
-            skipped.append({"sequence": source, "reason": str(exc)})
+            message = str(exc)
+            if not message.startswith(source):
+                message = f"{source}: {message}"
+            typer.echo(f"error: skipped {message}", err=True)
+            skipped.append({"sequence": source, "reason": message})
             continue
         sequences.append(seq)
     if not sequences:
@@ -154,9 +160,7 @@ def _finish_empty(skipped: list[dict], json_out: Path | None, protocol: str) -> 
         report = {"protocol": protocol, "frames": 0, "sequences": [], "methods": {}}
         report["skipped"] = skipped
         json_out.write_text(json.dumps(report, indent=2) + "\n")
-    for item in skipped:
-        typer.echo(f"skipped {item['sequence']}: {item['reason']}", err=True)
-    raise fail("nothing to evaluate: every sequence was skipped", code=1)
+    raise fail("nothing to evaluate: every sequence was skipped (named above)", code=1)
 
 
 @eval_app.command("utd")
@@ -221,6 +225,10 @@ def eval_utd(
         )
     try:
         names = parse_methods(methods)
+    except ValueError as exc:
+        raise fail(str(exc)) from exc
+    _check_outputs(json_out, figures)
+    try:
         found, missing = find_utd_sequences(root)
     except ValueError as exc:
         raise fail(str(exc)) from exc
@@ -237,14 +245,14 @@ def eval_utd(
     if limit is not None:
         found = found[:limit]
     for item in skipped:
-        typer.echo(f"error: {item['sequence']}: {item['reason']}", err=True)
+        typer.echo(f"error: skipped {item['sequence']}: {item['reason']}", err=True)
 
     def loaded():
         for name, depth, skel in found:
             try:
                 seq = load_utd_sequence(depth, skel, name=name)
             except ValueError as exc:
-                typer.echo(f"error: {name}: {exc}", err=True)
+                typer.echo(f"error: skipped {name}: {exc}", err=True)
                 skipped.append({"sequence": name, "reason": str(exc)})
                 continue
             yield seq

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Annotated
 
@@ -45,10 +46,16 @@ def synth(
         typer.Option("--intrinsics", help="fx,fy,cx,cy in pixels (with --size)."),
     ] = None,
     size: Annotated[
-        str, typer.Option("--size", help="Image size WIDTHxHEIGHT for --intrinsics.")
-    ] = "320x240",
+        str | None,
+        typer.Option(
+            "--size",
+            help="Image size WIDTHxHEIGHT of --intrinsics (default 320x240); a --camera "
+            "preset has its own size.",
+        ),
+    ] = None,
     distance: Annotated[
-        float, typer.Option("--distance", help="Camera to person at frame 0, metres.")
+        float,
+        typer.Option("--distance", help="Camera to person at frame 0, metres."),
     ] = 2.8,
     camera_height: Annotated[
         float, typer.Option("--camera-height", help="Camera height above the floor, metres.")
@@ -68,9 +75,15 @@ def synth(
     ] = False,
     height: Annotated[
         float | None,
-        typer.Option("--height", help="Person's stature in metres (default: the clip's own)."),
+        typer.Option(
+            "--height",
+            help="Person's stature in metres, in (0.5, 2.5) (default: the clip's own).",
+        ),
     ] = None,
-    girth: Annotated[float, typer.Option("--girth", help="Body girth factor (1 = default).")] = 1.0,
+    girth: Annotated[
+        float,
+        typer.Option("--girth", help="Body girth factor, > 0 (1 = default)."),
+    ] = 1.0,
     fps: Annotated[float, typer.Option("--fps", help="Frame rate to resample to.")] = 30.0,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the noise.")] = 0,
     sheet: Annotated[
@@ -83,22 +96,27 @@ def synth(
     DIR/ground_truth.json holds the intrinsics, fps, the 15 joints (metres, camera
     frame) and the eight angles of every frame. Frame 0 is the T-pose calibration
     frame; without --frames the whole clip is written at 30 fps. A contact sheet
-    (depth beside labels, a few frames) is written for a person to look at.
+    (depth beside labels, a few frames) is written for a person to look at. Frames
+    where the person is out of view are counted in a warning; when no frame shows
+    the person, nothing is written and the exit status is 1.
 
     Example: posedrift synth builtin --out walk --frames 90 --noise --background
     """
-    from posedrift.camera import camera_preset, parse_intrinsics
+    from posedrift.cli._outputs import check_output_dir, check_output_file
     from posedrift.synthetic import build_sequence, contact_sheet, write_synthetic
 
-    # --- camera -----------------------------------------------------------------------
+    for option, value, low, high in (
+        ("--height", height, 0.5, 2.5),
+        ("--girth", girth, 0.0, None),
+        ("--distance", distance, 0.0, None),
+        ("--fps", fps, 0.0, None),
+    ):
+        _check_range(option, value, low, high)
+    check_output_dir(out, "--out")
+    if sheet is not None:
+        check_output_file(sheet, "--sheet")
     try:
-        if camera is not None and intrinsics is not None:
-            raise ValueError("Give either --camera or --intrinsics, not both.")
-        if intrinsics is not None:
-            width, height_px = _parse_size(size)
-            k = parse_intrinsics(intrinsics, width=width, height=height_px)
-        else:
-            k = camera_preset(camera or "kinect1-qvga")
+        k = _camera(camera, intrinsics, size)
     except ValueError as exc:
         raise fail(str(exc)) from exc
 
@@ -128,10 +146,25 @@ def synth(
                 rng=seed,
                 on_frame=on_frame,
             )
+        empty = [i for i, labels in enumerate(sequence.reference.labels) if not labels.any()]
+        if len(empty) == len(sequence.frames):
+            raise fail(
+                f"no frame shows the person: they are out of the {k.width}x{k.height} view "
+                f"(--camera-height {camera_height:g} m, --distance {distance:g} m). "
+                "Nothing written.",
+                code=1,
+            )
         paths = write_synthetic(sequence, out, progress=show)
         sheet_path = contact_sheet(sequence, sheet or out / "contact_sheet.png")
     except ValueError as exc:
         raise fail(str(exc)) from exc
+    if empty:
+        shown = ", ".join(str(i) for i in empty[:10]) + (" ..." if len(empty) > 10 else "")
+        typer.echo(
+            f"warning: {len(empty)} of {len(sequence.frames)} frames show no person "
+            f"(out of view): frames {shown}.",
+            err=True,
+        )
     n = len(sequence.frames)
     typer.echo(
         f"wrote {n} frames ({n / sequence.fps:.1f} s at {sequence.fps:g} fps, "
@@ -140,25 +173,74 @@ def synth(
     )
 
 
+_RIG_HINT = re.compile(r"Pass rig=.*$", re.DOTALL)
+_RIG_ADVICE = (
+    "Rename the file's joints to the names looked for, or map them in Python: "
+    "posedrift.synthetic.bvh_motion(path, rig={joint name: node name})."
+)
+
+
+def _check_range(option: str, value: float | None, low: float, high: float | None) -> None:
+    """Fail naming ``option`` unless ``value`` (None: not given) lies in ``(low, high)``."""
+    if value is None or (low < value and (high is None or value < high)):
+        return  # NaN fails both comparisons, so it is rejected too
+    interval = f"in ({low:g}, {high:g})" if high is not None else f"greater than {low:g}"
+    raise fail(f"{option} must be {interval}. Got {value:g}.")
+
+
+def _camera(camera: str | None, intrinsics: str | None, size: str | None):
+    """The Intrinsics that --camera, --intrinsics and --size ask for."""
+    from posedrift.camera import CAMERA_PRESETS, camera_preset, parse_intrinsics
+
+    if camera is not None and intrinsics is not None:
+        raise ValueError("Give either --camera or --intrinsics, not both.")
+    if intrinsics is not None:
+        width, height = _parse_size(size or "320x240")
+        return parse_intrinsics(intrinsics, width=width, height=height)
+    name = camera or "kinect1-qvga"
+    k = camera_preset(name)
+    if size is not None and _parse_size(size) != (k.width, k.height):
+        width, height = _parse_size(size)
+        same = [n for n, p in CAMERA_PRESETS.items() if (p.width, p.height) == (width, height)]
+        others = f" (or {', '.join(same[1:])})" if len(same) > 1 else ""
+        presets = f"--camera {same[0]}{others}, or " if same else ""
+        raise ValueError(
+            f"--size {size} goes with --intrinsics: the camera preset {name!r} is "
+            f"{k.width}x{k.height}. For {width}x{height} frames, give "
+            f"{presets}--intrinsics fx,fy,cx,cy with --size {width}x{height}."
+        )
+    return k
+
+
 def _load_source(source: str):
-    """``builtin`` or a BVH file, as a Motion; errors name the file."""
+    """``builtin`` or a BVH file, as a Motion.
+
+    Raises
+    ------
+    ValueError
+        With a message that starts with the file's name (and names it only there):
+        no such file, not a file, malformed BVH, or joints that cannot be mapped
+        (with what to do about it on the command line).
+    """
     from posedrift.synthetic import bvh_motion, procedural_motion
 
     if source == "builtin":
         return procedural_motion(fps=30.0)
     path = Path(source)
     if not path.is_file():
-        raise ValueError(
-            f"SOURCE {source!r} is neither 'builtin' nor a readable BVH file "
-            f"({'no such file' if not path.exists() else 'not a file'})."
-        )
+        why = "no such file" if not path.exists() else "not a file"
+        raise ValueError(f"{source}: {why} (SOURCE is a BVH file or 'builtin').")
     try:
         return bvh_motion(path)
-    except (ValueError, OSError, UnicodeDecodeError) as exc:
-        message = str(exc)
-        if str(path) not in message and path.name not in message:
-            message = f"{path}: {message}"
-        raise ValueError(f"SOURCE is not a readable BVH file: {message}") from exc
+    except OSError as exc:
+        raise ValueError(f"{source}: cannot read the file ({exc.strerror or exc}).") from exc
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{source}: not a BVH file (not text: {exc.reason}).") from exc
+    except ValueError as exc:
+        message = _RIG_HINT.sub(_RIG_ADVICE, str(exc))
+        if not message.startswith(str(path)):
+            message = f"{source}: {message}"
+        raise ValueError(message) from exc
 
 
 class _Progress:

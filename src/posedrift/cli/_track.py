@@ -21,6 +21,8 @@ from posedrift.cli._options import (
 )
 
 EXIT_UNREADABLE_FRAMES = 1
+EXIT_INTERRUPTED = 130
+"""128 + SIGINT, as shells report a run stopped by Ctrl-C."""
 
 
 @app.command("track")
@@ -59,13 +61,16 @@ def track(
     the Kinect SDK's skeleton convention (posedrift.skeleton.to_convention), for
     comparison with Kinect-based tools. Exit status 1 when a frame could not be
     read (the others are still processed and written), 2 for unusable input or
-    options.
+    options (an unusable --out is reported before any work), 130 after Ctrl-C
+    (the outputs then hold the frames processed so far). Frames without a person
+    are a per-frame status (no_person), not an error: exit status 0, and the
+    summary says when no frame had one.
 
     Example: posedrift track recording/ --out poses/ --camera kinect1-vga
     """
     from rich.progress import Progress
 
-    from posedrift.cli._outputs import video_stride, write_outputs
+    from posedrift.cli._outputs import check_output_dir, video_stride, write_outputs
     from posedrift.io import UnreadableFrame, open_depth_source
     from posedrift.skeleton import CONVENTIONS
     from posedrift.tracking import FrameResult, FrameStatus, PoseTracker
@@ -76,6 +81,9 @@ def track(
         raise fail(
             f"Unknown --convention {convention!r}: expected one of {', '.join(CONVENTIONS)}."
         )
+    check_output_dir(out, "--out")
+    if point_clouds:
+        check_output_dir(out / "points", "--point-clouds")
     try:
         reader = open_depth_source(
             source,
@@ -91,8 +99,10 @@ def track(
     results: list[FrameResult] = []
     frames: list = []
     unreadable = 0
+    with_depth = 0  # frames with at least one valid (positive, finite) depth pixel
     seconds = 0.0
     written: dict = {}
+    interrupted = False
     stride = video_stride(len(reader))  # only the frames the animation shows are kept
     try:
         with Progress(disable=not progress_enabled(), transient=True) as bar:
@@ -100,16 +110,20 @@ def track(
             for item in reader:
                 if isinstance(item, UnreadableFrame):
                     unreadable += 1
-                    typer.echo(f"warning: {item.source}: {item.message}", err=True)
-                    results.append(FrameResult.empty(item.index, FrameStatus.LOST, item.message))
+                    message = f"{item.source}: {item.message}"
+                    typer.echo(f"warning: {message}", err=True)
+                    results.append(FrameResult.empty(item.index, FrameStatus.LOST, message))
                     frames.append(None)
                 else:
+                    with_depth += bool(np.any(item.depth > 0))
                     start = time.perf_counter()
                     results.append(tracker.process(item))
                     seconds += time.perf_counter() - start
                     keep = video and len(frames) % stride == 0
                     frames.append(item if keep else None)
                 bar.advance(task)
+    except KeyboardInterrupt:
+        interrupted = True
     finally:  # whatever was processed is written, even after an interruption
         if results:
             results = _in_convention(results, convention)
@@ -129,8 +143,41 @@ def track(
 
                 written["points"] = write_point_clouds(results, out / "points", fmt=point_clouds)
     _summary(results, seconds, written)
+    if results and not interrupted:
+        _no_pose_warning(results, unreadable=unreadable, with_depth=with_depth, source=source)
+    if interrupted:
+        n = len(results)
+        typer.echo(
+            f"interrupted at frame {n} of {len(reader)}: "
+            + (
+                f"the outputs in {out} hold the {n} frames processed so far (0 to {n - 1})."
+                if n
+                else "no frame was processed, nothing written."
+            ),
+            err=True,
+        )
+        raise typer.Exit(EXIT_INTERRUPTED)
     if unreadable:
         raise typer.Exit(EXIT_UNREADABLE_FRAMES)
+
+
+def _no_pose_warning(results: list, *, unreadable: int, with_depth: int, source: Path) -> None:
+    """Say plainly when no frame of the input gave a pose, and the likely reason."""
+    from posedrift.tracking import FrameStatus
+
+    if any(r.status in (FrameStatus.TRACKED, FrameStatus.REINITIALIZED) for r in results):
+        return
+    n = len(results)
+    if unreadable == n:
+        reason = f"none of the {n} frames of {source} could be read"
+    elif with_depth == 0:
+        reason = (
+            f"no frame of {source} has valid depth (every pixel is 0, NaN or negative); "
+            f"check the input and --depth-scale"
+        )
+    else:
+        reason = f"no person was found (or posed) in any of the {n} frames of {source}"
+    typer.echo(f"warning: no pose recovered: {reason}.", err=True)
 
 
 def _in_convention(results: list, convention: str) -> list:
@@ -163,4 +210,8 @@ def _summary(results, seconds: float, written: dict) -> None:
             + ", ".join(f"{k} {np.median(v):.2f}" for k, v in stages.items())
         )
     for name, path in written.items():
-        typer.echo(f"{name}: {path}")
+        if isinstance(path, list | tuple):  # one file per frame: say where and how many
+            folder = path[0].parent if path else "-"
+            typer.echo(f"{name}: {len(path)} files in {folder}")
+        else:
+            typer.echo(f"{name}: {path}")

@@ -68,6 +68,15 @@ def train(
             "--wide-yaw", min=0.0, max=180.0, help="Largest turn of the wide views, degrees."
         ),
     ] = 100.0,
+    min_pose_distance: Annotated[
+        float,
+        typer.Option(
+            "--min-pose-distance",
+            min=0.0,
+            help="Drop clip frames whose pose is within this many metres of a kept one "
+            "(every joint); 0 keeps all and weights the clips equally.",
+        ),
+    ] = 0.0,
 ) -> None:
     """Train a body-part forest on rendered synthetic depth frames (needs scikit-learn).
 
@@ -82,8 +91,10 @@ def train(
 
     import numpy as np
 
+    from posedrift.cli._outputs import check_output_file
     from posedrift.labelling import _train as tr
 
+    check_output_file(out, "--out")
     try:
         import sklearn  # noqa: F401
     except ImportError as exc:
@@ -100,10 +111,18 @@ def train(
         )
         n_clips = len(motions) - 1
         share = procedural_share if n_clips else 1.0
-        weights = [(1.0 - share) / max(n_clips, 1)] * n_clips + [share]
+        pose_frames = None
+        if min_pose_distance > 0 and n_clips:
+            # Each distinct clip pose equally likely, the procedural motion its share.
+            pose_frames = tr.diverse_frames(motions[:-1], min_pose_distance, rng=seed)
+            counts = np.array([len(f) for f in pose_frames], dtype=float)
+            weights = list((1.0 - share) * counts / counts.sum()) + [share]
+            pose_frames.append(np.arange(len(motions[-1].joints)))
+        else:
+            weights = [(1.0 - share) / max(n_clips, 1)] * n_clips + [share]
         ranges = tr.SceneRanges(wide_fraction=wide_share, wide_yaw=wide_yaw)
         generator = tr.synthetic_training_frames(
-            frames, motions, ranges=ranges, weights=weights, rng=render_rng
+            frames, motions, ranges=ranges, weights=weights, frames=pose_frames, rng=render_rng
         )
         metadata = {
             "command": "posedrift train",
@@ -114,6 +133,7 @@ def train(
             "procedural_share": share,
             "wide_share": wide_share,
             "wide_yaw": wide_yaw,
+            "min_pose_distance": min_pose_distance,
         }
         with tr._progress(progress_enabled(), "rendering + features", frames) as advance:
             forest = tr.train_forest(

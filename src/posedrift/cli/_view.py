@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 from pathlib import Path
 from typing import Annotated
 
@@ -20,6 +21,7 @@ from posedrift.cli._options import (
 EXIT_OK = 0
 EXIT_UNREADABLE_FRAMES = 1
 EXIT_BAD_INPUT = 2
+PREVIEW_SUFFIXES = (".gif", ".mp4")
 
 
 @app.command("view")
@@ -43,16 +45,27 @@ def view(
 
     Unreadable frames are listed with their file and reason.
     Exit status: 0 when the input is usable; 2 when it cannot be
-    opened (the message says why and lists the valid choices);
-    1 with --strict when some frames are unreadable.
+    opened or used (the message says why and lists the valid choices;
+    an input where no frame has valid depth is not usable; a bad --out
+    is reported before any frame is read); 1 with --strict when some
+    frames are unreadable.
 
     Example: posedrift view recording/ --camera kinect1-vga --out preview.gif
     """
     import numpy as np
 
     from posedrift.camera import DepthFrame
+    from posedrift.cli._outputs import check_output_file
     from posedrift.io import UnreadableFrame, open_depth_source
 
+    if out is not None:
+        check_output_file(out, "--out", suffixes=PREVIEW_SUFFIXES)
+        if out.suffix.lower() == ".mp4" and importlib.util.find_spec("imageio_ffmpeg") is None:
+            raise fail(
+                f"--out {str(out)!r}: writing .mp4 needs imageio-ffmpeg "
+                f"(pip install imageio-ffmpeg); or write a .gif instead.",
+                EXIT_BAD_INPUT,
+            )
     try:
         reader = open_depth_source(
             source,
@@ -93,18 +106,31 @@ def view(
     typer.echo(
         f"camera     {k.width} x {k.height}, fx {k.fx:g}, fy {k.fy:g}, cx {k.cx:g}, cy {k.cy:g}"
     )
-    typer.echo(f"depth      {reader.depth_scale:g} units per metre")
+    if reader.depth_scale == 1.0:
+        typer.echo("depth      in metres (1 unit per metre)")
+    else:
+        typer.echo(f"depth      {reader.depth_scale:g} units per metre")
     if reader.unmirror:
         typer.echo("mirrored   yes: frames flipped left-right, cx adjusted")
-    if coverage:
+    if np.isfinite(nearest):
         typer.echo(
             f"range      {nearest:.3f} - {farthest:.3f} m; "
             f"{100 * float(np.mean(coverage)):.1f}% of pixels have depth"
         )
+    elif coverage:
+        typer.echo("range      none: no pixel of any frame has depth")
     for frame in bad[:20]:
         typer.echo(f"unreadable {frame}", err=True)
     if len(bad) > 20:
         typer.echo(f"unreadable ... and {len(bad) - 20} more", err=True)
+    if not np.isfinite(nearest):
+        what = (
+            f"none of the {total} frames can be read"
+            if not coverage
+            else f"no frame has valid depth (every pixel of the {len(coverage)} readable "
+            f"frames is 0, NaN or negative); check the input and --depth-scale"
+        )
+        raise fail(f"{source} is not usable: {what}.", EXIT_BAD_INPUT)
     if out is not None:
         from posedrift.visualization._draw import write_depth_video
 

@@ -253,11 +253,51 @@ def _natural_key(path: Path) -> tuple:
     return tuple(int(t) if t.isdigit() else t for t in re.split(r"(\d+)", path.name))
 
 
+_DEPTH_SUBFOLDER = "depth"
+_SYNTH_GROUND_TRUTH = "ground_truth.json"
+
+
+def _png_files(folder: Path) -> list[Path]:
+    """The ``.png`` files directly in ``folder``, in natural name order."""
+    return sorted((p for p in folder.iterdir() if p.suffix.lower() == ".png"), key=_natural_key)
+
+
+def _synthetic_folder_info(folder: Path) -> dict:
+    """The camera and frame rate a ``posedrift synth`` folder records, if it is one.
+
+    Returns ``{"where": path, "intrinsics": Intrinsics, "fps": float}`` (the keys
+    that could be read) for a folder with ``depth/`` and ``ground_truth.json``,
+    else ``{}``. A malformed file is only logged: the frames can still be read.
+    """
+    import json
+
+    truth_path = folder / _SYNTH_GROUND_TRUTH
+    if not ((folder / _DEPTH_SUBFOLDER).is_dir() and truth_path.is_file()):
+        return {}
+    info: dict = {"where": str(truth_path)}
+    try:
+        truth = json.loads(truth_path.read_text())
+        if truth.get("intrinsics") is not None:
+            info["intrinsics"] = Intrinsics.from_dict(truth["intrinsics"])
+        fps = truth.get("fps")
+        if isinstance(fps, int | float) and np.isfinite(fps) and fps > 0:
+            info["fps"] = float(fps)
+    except (OSError, UnicodeDecodeError, ValueError, TypeError, KeyError, AttributeError) as exc:
+        logger.warning("Ignoring %s (%s); reading the depth frames alone.", truth_path, exc)
+    return info
+
+
 class PngFolderSource(DepthSource):
     """A folder of 16-bit greyscale PNG depth frames, in natural file-name order.
 
     Frame timestamps come from file names that are times in seconds (TUM RGB-D's
     ``1305031102.160407.png``), else ``index / fps``.
+
+    A folder with a ``depth/`` subfolder of PNGs (as ``posedrift synth`` and TUM
+    RGB-D write) reads the frames there; anything beside them (a contact sheet,
+    ``rgb/``) is ignored. A ``posedrift synth`` folder's ``ground_truth.json``
+    gives the intrinsics (unless ``camera`` or ``intrinsics`` is given) and the
+    frame rate.
     """
 
     def __init__(
@@ -271,19 +311,22 @@ class PngFolderSource(DepthSource):
         unmirror: bool = False,
     ) -> None:
         folder = Path(path)
-        files = sorted(
-            (p for p in folder.iterdir() if p.suffix.lower() == ".png"), key=_natural_key
-        )
-        if not files and (folder / "depth").is_dir():
-            folder = folder / "depth"
-            files = sorted(
-                (p for p in folder.iterdir() if p.suffix.lower() == ".png"), key=_natural_key
-            )
+        synth = _synthetic_folder_info(folder)
+        if (folder / _DEPTH_SUBFOLDER).is_dir() and _png_files(folder / _DEPTH_SUBFOLDER):
+            # a folder of `posedrift synth` (or a TUM sequence): the frames are in depth/,
+            # whatever else (contact_sheet.png, rgb/) lies beside them
+            folder = folder / _DEPTH_SUBFOLDER
+        files = _png_files(folder)
         if not files:
             raise ValueError(
                 f"The folder {str(path)!r} holds no .png depth frames (nor does a 'depth' "
                 f"subfolder). Expected 16-bit greyscale PNG files such as 000000.png."
             )
+        if synth and camera is None and intrinsics is None and "intrinsics" in synth:
+            intrinsics = synth["intrinsics"]
+            logger.info("Using the intrinsics of %s.", synth["where"])
+        if synth and "fps" in synth:
+            fps = synth["fps"]
         self.path = folder
         self.files = tuple(files)
         self.fps = float(fps)
@@ -504,7 +547,13 @@ def _open_mat(path: Path, **options) -> ArraySource:
             f"The MATLAB file {str(path)!r} has no depth variable: expected 'd_depth' "
             f"(UTD-MHAD) or 'depth'. Variables found: {', '.join(names) if names else 'none'}."
         )
-    data = loadmat(path, variable_names=[key])[key]
+    try:
+        data = loadmat(path, variable_names=[key])[key]
+    except Exception as exc:  # scipy says only "could not read bytes" for a truncated file
+        raise ValueError(
+            f"Cannot read the variable {key!r} of the MATLAB file {str(path)!r} "
+            f"(truncated or corrupt?): {exc}"
+        ) from exc
     if data.ndim == 3:
         data = np.moveaxis(data, -1, 0)  # UTD-MHAD stores height x width x frames
     if options.get("unmirror") is None:

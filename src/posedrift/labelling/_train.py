@@ -275,19 +275,38 @@ def label_accuracy(
 
 
 def read_label_folder(
-    folder: str | Path, *, max_frames: int | None = None
+    folder: str | Path,
+    *,
+    max_frames: int | None = None,
+    on_skip: Callable[[str, str], None] | None = None,
 ) -> Iterator[tuple[str, LabelledFrame]]:
     """Frames of a folder written by ``posedrift synth``: ``(name, LabelledFrame)`` each.
 
     Reads ``ground_truth.json`` (intrinsics), ``depth/NNNNNN.png`` (uint16 millimetres)
-    and ``labels/NNNNNN.png`` (part index + 1).
+    and ``labels/NNNNNN.png`` (part index + 1). A frame that cannot be used (a missing,
+    empty or undecodable PNG, another bit depth or size, a label above 15) is skipped
+    and the rest of the folder is still read: ``on_skip(name, reason)`` is called with
+    the frame's name (``"000004.png"``) and a reason naming the file; without
+    ``on_skip``, a :class:`RuntimeWarning` ``"<folder>: skipped frame <name>: <reason>"``
+    is issued instead.
+
+    Parameters
+    ----------
+    folder : str or Path
+    max_frames : int, optional
+        Read only the first ``max_frames`` depth files, in name order.
+    on_skip : callable, optional
+        Called as ``on_skip(name, reason)`` for each skipped frame.
 
     Raises
     ------
     ValueError
-        If the folder, its ``ground_truth.json`` or a frame cannot be read, naming it.
+        If the folder's ``ground_truth.json`` cannot be read or ``depth/`` holds no PNG
+        file, naming it.
     """
-    import imageio.v3 as iio
+    import warnings
+
+    from PIL import Image, UnidentifiedImageError
 
     folder = Path(folder)
     truth_path = folder / "ground_truth.json"
@@ -301,23 +320,51 @@ def read_label_folder(
     names = sorted(p.name for p in (folder / "depth").glob("*.png"))
     if not names:
         raise ValueError(f"{folder / 'depth'} holds no depth PNG frames.")
+    height, width = intrinsics.shape
+
+    def read(kind: str, name: str) -> np.ndarray:
+        path = folder / kind / name
+        if not path.is_file():
+            raise ValueError(f"{kind}/{name} is missing")
+        if path.stat().st_size == 0:
+            raise ValueError(f"{kind}/{name} is empty (0 bytes)")
+        try:
+            with Image.open(path) as image:
+                image.load()
+                pixels = np.array(image)
+        except UnidentifiedImageError:
+            raise ValueError(f"{kind}/{name} is not an image file") from None
+        except Exception as exc:  # any decoder failure: OSError, struct.error, SyntaxError...
+            raise ValueError(f"{kind}/{name} cannot be decoded ({exc})") from exc
+        # Pillow before 10 reads a 16-bit greyscale PNG as int32 ("I" mode).
+        dtypes = (np.uint16, np.int32) if kind == "depth" else (np.uint8,)
+        if pixels.ndim != 2 or pixels.dtype not in dtypes:
+            expected = "16-bit (millimetres)" if kind == "depth" else "8-bit (part + 1)"
+            raise ValueError(
+                f"{kind}/{name} is not a {expected} greyscale PNG: read {pixels.dtype} "
+                f"of shape {pixels.shape}"
+            )
+        if pixels.shape != (height, width):
+            raise ValueError(
+                f"{kind}/{name} is {pixels.shape[1]} x {pixels.shape[0]} pixels; "
+                f"{truth_path.name} says {width} x {height}"
+            )
+        return pixels
+
     for name in names[:max_frames]:
         try:
-            raw = np.asarray(iio.imread(folder / "depth" / name))
-            labels = np.asarray(iio.imread(folder / "labels" / name))
-        except (OSError, ValueError) as exc:
-            raise ValueError(f"Cannot read frame {name} of {folder}: {exc}") from exc
-        if raw.shape != intrinsics.shape or labels.shape != intrinsics.shape:
-            raise ValueError(
-                f"Frame {name} of {folder} has depth {raw.shape} and labels {labels.shape}; "
-                f"the intrinsics say {intrinsics.shape}."
-            )
-        if labels.max(initial=0) > len(PART_NAMES):
-            raise ValueError(
-                f"Frame {name} of {folder} has label {int(labels.max())}; labels are 0..15."
-            )
+            raw = read("depth", name)
+            labels = read("labels", name)
+            if labels.max() > len(PART_NAMES):
+                raise ValueError(f"labels/{name} holds {int(labels.max())}; labels are 0..15")
+        except ValueError as exc:
+            if on_skip is not None:
+                on_skip(name, str(exc))
+            else:
+                warnings.warn(f"{folder}: skipped frame {name}: {exc}", RuntimeWarning, 2)
+            continue
         depth = raw.astype(np.float32) / np.float32(1000.0)
-        yield name, LabelledFrame(depth, labels.astype(np.uint8), intrinsics)
+        yield name, LabelledFrame(depth, labels, intrinsics)
 
 
 def colour_labels(labels: np.ndarray) -> np.ndarray:
@@ -371,10 +418,12 @@ def evaluate_label_folder(
     png: str | Path | None = None,
     n_pictures: int = 4,
     progress: bool = False,
+    on_skip: Callable[[str, str], None] | None = None,
 ) -> dict:
     """Per-pixel label accuracy of ``forest`` on a ``posedrift synth`` folder.
 
-    The forest sees each frame's depth and the true silhouette as its mask.
+    The forest sees each frame's depth and the true silhouette as its mask. Frames
+    that cannot be read are skipped as :func:`read_label_folder` says (``on_skip``).
 
     Returns
     -------
@@ -396,7 +445,7 @@ def evaluate_label_folder(
     times = []
     shown: list[tuple[LabelledFrame, np.ndarray]] = []
     n_frames = 0
-    frames = read_label_folder(folder, max_frames=max_frames)
+    frames = read_label_folder(folder, max_frames=max_frames, on_skip=on_skip)
     with _progress(progress, "labelling", None) as advance:
         for _, frame in frames:
             n_frames += 1
@@ -545,6 +594,93 @@ def random_shape(rng: np.random.Generator, ranges: SceneRanges, morph_names: Seq
     }
 
 
+def pose_descriptors(joints: np.ndarray, stature: float) -> np.ndarray:
+    """Poses made comparable: pelvis-centred, turned to face +Z, scaled to a 1.75 m stature.
+
+    Parameters
+    ----------
+    joints : (T, 15, 3) float
+        World frame, metres, +Y up.
+    stature : float
+        The skeleton's stature, metres.
+
+    Returns
+    -------
+    (T, 15, 3) float
+    """
+    from posedrift.skeleton import JOINT_INDEX as J
+
+    joints = np.asarray(joints, dtype=float)
+    pelvis = 0.5 * (joints[:, J["right_hip"]] + joints[:, J["left_hip"]])
+    rel = joints - pelvis[:, None]
+    # The person's right-to-left direction (hips and shoulders) turned onto +X.
+    across = (joints[:, J["left_hip"]] - joints[:, J["right_hip"]]) + (
+        joints[:, J["left_shoulder"]] - joints[:, J["right_shoulder"]]
+    )
+    angle = np.arctan2(across[:, 2], across[:, 0])[:, None]
+    cos, sin = np.cos(angle), np.sin(angle)
+    turned = np.stack(
+        [cos * rel[..., 0] + sin * rel[..., 2], rel[..., 1], cos * rel[..., 2] - sin * rel[..., 0]],
+        axis=-1,
+    )
+    return turned * (1.75 / stature)
+
+
+def diverse_frames(
+    motions: Sequence, min_distance: float, *, rng: int | np.random.Generator | None = 0
+) -> list[np.ndarray]:
+    """The frames of each motion left after removing near-duplicate poses.
+
+    Shotton et al.'s de-duplication: frames are visited in random order and kept when
+    every joint-by-joint comparison with each kept pose finds some joint more than
+    ``min_distance`` away (poses compared as :func:`pose_descriptors`, across all
+    motions). Training on the kept frames weights each distinct pose equally, instead
+    of each clip: repetitive motions (walks) shrink, varied ones keep their frames.
+
+    Parameters
+    ----------
+    motions : sequence of Motion
+    min_distance : float
+        Metres, at a 1.75 m stature.
+    rng : int, Generator or None
+        Visiting order.
+
+    Returns
+    -------
+    list of (K_i,) int arrays
+        Sorted frame indices kept, one array per motion.
+
+    Examples
+    --------
+    >>> from posedrift.synthetic import procedural_motion
+    >>> motion = procedural_motion(fps=30.0)
+    >>> [kept] = diverse_frames([motion], 0.05)
+    >>> bool(0 < len(kept) < len(motion.joints))
+    True
+    """
+    min_distance = check_scalar(
+        min_distance, "min_distance", low=0.0, include_low=True, caller="diverse_frames"
+    )
+    rng = check_rng(rng)
+    pool = [pose_descriptors(m.joints, _stature(np.asarray(m.joints[0]))) for m in motions]
+    owner = np.concatenate([np.full(len(d), k) for k, d in enumerate(pool)])
+    frame = np.concatenate([np.arange(len(d)) for d in pool])
+    flat = np.concatenate(pool).reshape(len(owner), -1)
+    kept = np.empty_like(flat)
+    chosen = []
+    limit2 = min_distance**2
+    for i in rng.permutation(len(flat)):
+        if chosen:
+            diff = kept[: len(chosen)] - flat[i]
+            far2 = (diff.reshape(len(chosen), -1, 3) ** 2).sum(axis=2).max(axis=1)
+            if far2.min() <= limit2:
+                continue
+        kept[len(chosen)] = flat[i]
+        chosen.append(i)
+    chosen = np.asarray(chosen, dtype=np.intp)
+    return [np.sort(frame[chosen[owner[chosen] == k]]) for k in range(len(motions))]
+
+
 def _facing(joints: np.ndarray) -> np.ndarray:
     """Horizontal unit vector the person faces (from the hips; +X person's left)."""
     from posedrift.skeleton import JOINT_INDEX
@@ -626,6 +762,7 @@ def synthetic_training_frames(
     intrinsics: Intrinsics | None = None,
     body=None,
     weights: Sequence[float] | None = None,
+    frames: Sequence[np.ndarray] | None = None,
     min_pixels: int = 300,
     rng: int | np.random.Generator | None = None,
 ) -> Iterator[LabelledFrame]:
@@ -648,6 +785,8 @@ def synthetic_training_frames(
         Default :meth:`BodyModel.load_default`.
     weights : sequence of float, optional
         Relative probability of each motion.
+    frames : sequence of int arrays, optional
+        The frames of each motion to draw from (default all; see :func:`diverse_frames`).
     min_pixels : int
         Fewest person pixels a frame must show.
     rng : int, Generator or None
@@ -673,6 +812,11 @@ def synthetic_training_frames(
             f"numbers, one per motion. Got {weights!r}."
         )
     p = p / p.sum()
+    if frames is not None and len(frames) != len(motions):
+        raise ValueError(
+            f"The 'frames' of synthetic_training_frames must hold one array per motion "
+            f"({len(motions)}). Got {len(frames)}."
+        )
     made = 0
     attempts = 0
     while made < n_frames:
@@ -681,7 +825,12 @@ def synthetic_training_frames(
             raise ValueError("synthetic_training_frames: too many views without a person.")
         k = int(rng.choice(len(motions), p=p))
         motion = motions[k]
-        t = 0 if rng.uniform() < ranges.t_pose_fraction else int(rng.integers(len(motion.joints)))
+        if rng.uniform() < ranges.t_pose_fraction:
+            t = 0
+        elif frames is None or len(frames[k]) == 0:
+            t = int(rng.integers(len(motion.joints)))
+        else:
+            t = int(frames[k][rng.integers(len(frames[k]))])
         shape = random_shape(rng, ranges, base.morph_names)
         wide = bool(rng.uniform() < ranges.wide_fraction)
         height = shape["height"]

@@ -1,0 +1,97 @@
+"""How much of the tracker's angle error do its labels cause? A perfect-label control.
+
+For each synthetic clip this runs the tracker (``PoseTracker``, depth and intrinsics
+only) and, on the same frames, the same skeleton stage fed the *true* part labels:
+the frame's person pixels back-projected and downsampled as the tracker does, each
+point given the label of its nearest pixel, then mean shift and ``fit_skeleton``
+with the tracker's own calibration (stature and bone lengths), frame by frame with
+no temporal prediction. The control reads ground truth, so it lives here, beside
+the method, never in it: it bounds what better labels alone could give, and its
+first / last 100-frame ratio measures how much harder the end of a clip is than its
+beginning (the drift target compares those windows).
+
+Usage (about 30 s per 500-frame clip)::
+
+    OMP_NUM_THREADS=1 python benchmarks/label_oracle.py builtin \\
+        ../shared/data/mocap/cmu/002_07.bvh --frames 500
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from posedrift.camera import backproject
+from posedrift.evaluation._harness import VIEWS
+from posedrift.labelling._relabel import geodesic_graph
+from posedrift.points import downsample
+from posedrift.skeleton import facing_yaw, joint_angles
+from posedrift.skeleton._fit import fit_skeleton
+from posedrift.skeleton._meanshift import part_modes
+from posedrift.synthetic import build_sequence, bvh_motion, procedural_motion
+from posedrift.tracking import PoseTracker
+
+
+def true_label_angles(sequence, calibration, n_points: int = 400) -> np.ndarray:
+    """``(T, 8)`` angles of the skeleton fitted to each frame's true labels."""
+    out = np.full((len(sequence.frames), 8), np.nan)
+    for t, frame in enumerate(sequence.frames):
+        truth = sequence.reference.labels[t]
+        mask = (truth > 0) & (frame.depth > 0)
+        if mask.sum() < 60:
+            continue
+        full, pixels = backproject(frame.depth, frame.intrinsics, mask)
+        points = downsample(full, n_points, rng=0)
+        _, nearest = cKDTree(full).query(points)
+        labels = truth[pixels[nearest, 0], pixels[nearest, 1]].astype(np.int64) - 1
+        graph = geodesic_graph(points)
+        fit = fit_skeleton(
+            points,
+            labels,
+            bone_lengths=calibration.bone_lengths,
+            edges=(graph.rows, graph.cols),
+            modes=part_modes(points, labels, bandwidth=0.06),
+            height=calibration.height,
+        )
+        out[t] = joint_angles(fit.joints)
+    return out
+
+
+def summary(errors: np.ndarray, yaw: np.ndarray) -> dict[str, float]:
+    """Mean error, first / last 100 frames and per view, of ``(T,)`` per-frame errors."""
+    row = {"mean": np.nanmean(errors)}
+    row["first 100"], row["last 100"] = np.nanmean(errors[:100]), np.nanmean(errors[-100:])
+    row["last/first"] = row["last 100"] / row["first 100"]
+    for view, (low, high) in VIEWS.items():
+        inside = (yaw >= low) & (yaw < high)
+        row[view] = np.nanmean(errors[inside]) if inside.any() else np.nan
+    return row
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("clips", nargs="+", help="BVH files, or 'builtin'")
+    parser.add_argument("--frames", type=int, default=500)
+    args = parser.parse_args()
+    columns = ["mean", "first 100", "last 100", "last/first", *VIEWS]
+    print("| clip | labels | " + " | ".join(columns) + " |")
+    print("|---|---|" + "---:|" * len(columns))
+    for clip in args.clips:
+        motion = procedural_motion(fps=30.0) if clip == "builtin" else bvh_motion(clip)
+        sequence = build_sequence(motion, n_frames=args.frames, in_place=True, rng=0, name=clip)
+        tracker = PoseTracker(sequence.frames[0].intrinsics)
+        tracked = joint_angles(np.stack([tracker.process(f).joints for f in sequence.frames]))
+        oracle = true_label_angles(sequence, tracker.calibration)
+        yaw = facing_yaw(sequence.reference.joints)
+        name = clip.rsplit("/", 1)[-1]
+        for kind, angles in (("tracker", tracked), ("true", oracle)):
+            errors = np.nanmean(np.abs(angles - sequence.reference.angles), axis=1)
+            row = summary(errors, yaw)
+            cells = " | ".join(f"{row[c]:.2f}" for c in columns)
+            print(f"| {name} | {kind} | {cells} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
