@@ -147,6 +147,18 @@ def test_missing_file(tmp_path):
         load_bvh(tmp_path / "nope.bvh")
 
 
+def test_utf8_byte_order_mark_is_ignored(tmp_path):
+    plain = parse_bvh(EXAMPLE_BVH)
+    path = tmp_path / "bom.bvh"
+    path.write_bytes(b"\xef\xbb\xbf" + EXAMPLE_BVH.replace("\n", "\r\n").encode())
+    for bvh in (load_bvh(path), parse_bvh("\ufeff" + EXAMPLE_BVH)):
+        assert bvh.names == plain.names and bvh.n_frames == plain.n_frames
+        np.testing.assert_array_equal(bvh.positions(), plain.positions())
+    # a BOM anywhere else is still an error at line 1
+    with pytest.raises(ValueError, match="line 1: a BVH file must start with 'HIERARCHY'"):
+        parse_bvh(" \ufeff" + EXAMPLE_BVH)
+
+
 # --------------------------------------------------------------------------- constructed rigs
 
 # Template skeleton (metres, +Y up, facing +Z, person's left +X): the roles a rig names.

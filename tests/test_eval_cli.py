@@ -392,3 +392,168 @@ def test_methods_help_lists_every_method():
         result = CliRunner().invoke(app, ["eval", command, "--help"], env={"COLUMNS": "300"})
         assert result.exit_code == 0
         assert "cpd-paper" in result.output and "icp-paper" in result.output
+
+
+# --- eval utd / the harness: unusable sequences named and skipped, the rest evaluated -----------
+
+
+def _write_utd(root, name, *, frames=3, depth=None, skel=None):
+    """Tiny UTD-MHAD files: ``Depth/{name}_depth.mat`` (a 3 m box) and a still skeleton
+    (``skel=False``: no skeleton file)."""
+    from scipy.io import savemat
+
+    (root / "Depth").mkdir(parents=True, exist_ok=True)
+    (root / "Skeleton").mkdir(exist_ok=True)
+    if depth is None:
+        depth = np.zeros((240, 320, frames), np.uint16)
+        depth[60:200, 140:180] = 3000
+    savemat(str(root / "Depth" / f"{name}_depth.mat"), {"d_depth": depth}, do_compression=True)
+    if skel is None:
+        joints = np.random.default_rng(1).normal(scale=0.3, size=(20, 3)) + [0.0, 0.0, 3.0]
+        skel = np.repeat(joints[:, :, None], frames, axis=2)
+    if skel is not False:
+        savemat(str(root / "Skeleton" / f"{name}_skeleton.mat"), {"d_skel": skel})
+
+
+def _eval_utd(root, *args, monkeypatch):
+    monkeypatch.setitem(harness.METHODS, "centroid", ("test only", Centroid))
+    monkeypatch.setattr(harness, "_default_forest", lambda: None)
+    return CliRunner().invoke(
+        app, ["-q", "eval", "utd", str(root), "--methods", "centroid", *map(str, args)]
+    )
+
+
+def _skip_lines(result):
+    return [line for line in result.stderr.splitlines() if line.startswith("error: skipped")]
+
+
+def test_eval_utd_skips_empty_and_untracked_sequences(tmp_path, monkeypatch):
+    root = tmp_path / "utd"
+    _write_utd(root, "a1_s1_t1")
+    _write_utd(root, "a3_s1_t1", depth=np.zeros((240, 320, 0), np.uint16))
+    _write_utd(root, "a4_s1_t1", skel=np.zeros((20, 3, 3)))
+    _write_utd(root, "a8_s1_t1", skel=np.full((20, 3, 3), np.nan))
+    out = tmp_path / "u.json"
+    result = _eval_utd(root, "--json", out, monkeypatch=monkeypatch)
+    assert result.exit_code == 1, result.output
+    assert "Traceback" not in result.output
+    data = json.loads(out.read_text())
+    assert data["sequences"] == ["a1_s1_t1"] and data["frames"] == 3
+    assert data["methods"]["centroid"]["mpjpe_mm"] is not None
+    assert [s["sequence"] for s in data["skipped"]] == ["a3_s1_t1", "a4_s1_t1", "a8_s1_t1"]
+    assert "a3_s1_t1_depth.mat' holds no frames" in data["skipped"][0]["reason"]
+    for item in data["skipped"][1:]:
+        assert f"{item['sequence']}_skeleton.mat' has no usable frame" in item["reason"]
+    assert len(_skip_lines(result)) == 3
+    assert "3 sequence(s) skipped (named above)" in result.stderr
+    # Alone, an untracked reference is still named and makes the exit status 1.
+    result = _eval_utd(root, "--sequences", "a4_s1_t1", "--json", out, monkeypatch=monkeypatch)
+    assert result.exit_code == 1, result.output
+    assert _skip_lines(result)[0].startswith("error: skipped a4_s1_t1: The UTD-MHAD skeleton")
+    assert "nothing to evaluate" in result.stderr
+    assert json.loads(out.read_text())["skipped"][0]["sequence"] == "a4_s1_t1"
+
+
+def test_run_methods_skips_unusable_sequences():
+    good = _toy_sequence(name="good")
+    k = good.frames[0].intrinsics
+    nothing = Reference(joints=np.zeros((0, 15, 3)), angles=np.zeros((0, 8)))
+    empty = EvaluationSequence(name="empty", frames=(), reference=nothing)
+    joints = np.full((2, 15, 3), np.nan)
+    untracked = EvaluationSequence(
+        name="untracked",
+        frames=tuple(DepthFrame(np.zeros(k.shape, np.float32), k, index=t) for t in range(2)),
+        reference=Reference(joints=joints, angles=joint_angles(joints)),
+    )
+    again = _toy_sequence(n=3, name="good")
+    skipped = []
+    run = harness.run_methods(
+        [empty, good, untracked, again],
+        {"centroid": Centroid},
+        forest=object(),
+        progress=False,
+        on_skip=lambda *a: skipped.append(a),
+    )
+    assert [s.name for s in run.sequences] == ["good"] and len(run.runs) == 1
+    assert len(run.runs[("centroid", "good")].results) == 6  # the first "good", not the second
+    assert skipped == run.skipped
+    assert skipped == [
+        ("empty", "it has no frames"),
+        (
+            "untracked",
+            "its reference has no usable frame (in none of its 2 frames are all 15 joints finite)",
+        ),
+        ("good", "a sequence of the same name was already evaluated in this run"),
+    ]
+    # Without on_skip: a warning per sequence; nothing usable at all is an error.
+    with pytest.warns(RuntimeWarning, match="skipped sequence 'empty': it has no frames"):
+        with pytest.raises(ValueError, match=r"No sequence to evaluate \(1 skipped\)"):
+            harness.run_methods([empty], {"centroid": Centroid}, forest=object(), progress=False)
+
+
+def test_eval_utd_odd_names_repeats_limit_and_empty_list(tmp_path, monkeypatch):
+    root = tmp_path / "utd"
+    _write_utd(root, "a1_s1_t1")
+    _write_utd(root, "a2_s1_t1", skel=False)
+    _write_utd(root, "a5_s1_t1 (copy)")
+    _write_utd(root, "A6_S1_T1")
+    out = tmp_path / "u.json"
+    result = _eval_utd(root, "--json", out, monkeypatch=monkeypatch)
+    assert result.exit_code == 1, result.output  # a2 has no skeleton
+    assert json.loads(out.read_text())["sequences"] == ["a1_s1_t1", "A6_S1_T1"]
+    warned = [line for line in result.stderr.splitlines() if "a5_s1_t1 (copy)" in line]
+    assert len(warned) == 1 and warned[0].startswith("warning: ")
+    assert "a5_s1_t1 (copy)_depth.mat: the name does not follow" in warned[0]
+    # Asked for by name, the odd file is evaluated; no warning about what was not asked for.
+    result = _eval_utd(
+        root, "--sequences", "a5_s1_t1 (copy),a6_s1_t1", "--json", out, monkeypatch=monkeypatch
+    )
+    assert result.exit_code == 0, result.output
+    assert json.loads(out.read_text())["sequences"] == ["a5_s1_t1 (copy)", "A6_S1_T1"]
+    assert "warning" not in result.stderr
+    # A repeated name: evaluated once, said once.
+    result = _eval_utd(
+        root, "--sequences", "a1_s1_t1,a1_s1_t1,a1_s1_t1", "--json", out, monkeypatch=monkeypatch
+    )
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert data["sequences"] == ["a1_s1_t1"] and data["frames"] == 3
+    assert result.stderr.count("warning: a1_s1_t1: named more than once") == 1
+    # --limit 1: the missing skeleton of a2 (not selected) does not count.
+    result = _eval_utd(root, "--limit", "1", "--json", out, monkeypatch=monkeypatch)
+    assert result.exit_code == 0, result.output
+    assert json.loads(out.read_text())["skipped"] == [] and not _skip_lines(result)
+    result = _eval_utd(root, "--limit", "2", monkeypatch=monkeypatch)
+    assert result.exit_code == 1 and _skip_lines(result)[0].startswith("error: skipped a2_s1_t1")
+    # An empty --sequences list says so.
+    result = _eval_utd(root, "--sequences", ",", monkeypatch=monkeypatch)
+    assert result.exit_code == 2
+    assert "--sequences ',' names no sequence" in result.stderr
+    assert "named above" not in result.stderr
+
+
+@pytest.mark.data
+def test_eval_synthetic_same_stem_gets_distinct_names(mocap_dir, tmp_path, monkeypatch):
+    import shutil
+
+    monkeypatch.setitem(harness.METHODS, "centroid", ("test only", Centroid))
+    monkeypatch.setattr(harness, "_default_forest", lambda: None)
+    for folder, clip in (("d1", "001_01"), ("d2", "001_08")):
+        (tmp_path / folder).mkdir()
+        shutil.copy(mocap_dir / "cmu" / f"{clip}.bvh", tmp_path / folder / "x.bvh")
+    first, second = tmp_path / "d1" / "x.bvh", tmp_path / "d2" / "x.bvh"
+    again = tmp_path / "d1" / ".." / "d1" / "x.bvh"
+    out = tmp_path / "r.json"
+    result = CliRunner().invoke(
+        app,
+        ["-q", "eval", "synthetic", str(first), str(second), str(again), "--frames", "3"]
+        + ["--methods", "centroid", "--json", str(out)],
+    )
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert data["sequences"] == ["x", "x-2"] and data["frames"] == 6
+    assert list(data["methods"]["centroid"]["per_sequence"]) == ["x", "x-2"]
+    assert f"note: {second} is evaluated as 'x-2' ({first} is 'x')" in result.stderr
+    assert f"warning: {again} is given more than once (as {first}): evaluated once" in (
+        result.stderr
+    )

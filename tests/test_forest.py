@@ -373,6 +373,7 @@ def test_cli_train_is_reproducible(tmp_path):
     np.testing.assert_array_equal(a.offsets, b.offsets)
     assert a.metadata["procedural_share"] == 1.0 and a.metadata["seed"] == 0
     assert a.metadata["wide_share"] == 0.3 and a.metadata["wide_yaw"] == 100.0
+    assert "no BVH clip to train on" in result.output
     result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "c.npz"), "--wide-yaw", "200"])
     assert result.exit_code == 2 and "--wide-yaw" in result.output
 
@@ -471,3 +472,18 @@ def test_diverse_frames_drop_near_duplicate_poses():
     # At 0 only exact repeats go (the procedural motion holds its T-pose for a while).
     n_distinct = len(np.unique(desc.reshape(len(desc), -1), axis=0))
     assert len(diverse_frames([motion], 0.0)[0]) == n_distinct < len(motion.joints)
+
+
+def test_training_clips_any_case_a_single_file_and_clear_errors(tmp_path):
+    from posedrift.labelling._train import training_clips
+
+    (tmp_path / "sub").mkdir()
+    for name in ("sub/A.BVH", "b.bvh", "007_01.bvh", "notes.txt"):
+        (tmp_path / name).write_text("HIERARCHY\n")
+    found = [p.name for p in training_clips(tmp_path)]
+    assert sorted(found) == ["A.BVH", "b.bvh"]  # 007_* is held out
+    assert training_clips(tmp_path / "b.bvh") == [tmp_path / "b.bvh"]
+    with pytest.raises(ValueError, match="notes.txt' is not a BVH file or a folder"):
+        training_clips(tmp_path / "notes.txt")
+    with pytest.raises(ValueError, match="nowhere' does not exist"):
+        training_clips(tmp_path / "nowhere")

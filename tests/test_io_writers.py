@@ -160,12 +160,35 @@ def test_bvh_identity_t_pose_and_varying_lengths(tmp_path):
     motion = path.read_text().split("Frame Time:")[1].splitlines()[1:]
     values = np.array([[float(v) for v in row.split()] for row in motion])
     np.testing.assert_allclose(values[0], values[2])
-    # lengths that vary by a few mm: limbs are off by about that, never by more than 1 cm
+    # Constant limb lengths: rotations only below the shoulders and hips.
+    trunk = ("torso", "neck", "head", "right_shoulder", "left_shoulder", "right_hip", "left_hip")
+    assert text_channels(path) == dict.fromkeys(trunk, 6)
+    # Lengths that vary by centimetres (a joint convention's offsets): those joints get
+    # position channels and are reproduced exactly; sub-tolerance variation stays
+    # within the tolerance.
     rng = np.random.default_rng(0)
-    joints = random_poses(10, rng=5) + rng.normal(0, 0.002, (10, 15, 3))
-    path, _ = write_bvh(joints, tmp_path / "noisy.bvh")
+    joints = random_poses(10, rng=5)
+    joints[:, JOINT_NAMES.index("left_hand")] += rng.normal(0, 0.03, (10, 3))
+    joints[:, JOINT_NAMES.index("right_knee")] += rng.normal(0, 0.001, (10, 3))
+    path, _ = write_bvh(joints, tmp_path / "stretchy.bvh")
     fk, _ = _bvh_world_joints(path, 10)
-    assert np.linalg.norm(fk - joints, axis=-1).max() < 0.01
+    error = np.linalg.norm(fk - joints, axis=-1)
+    assert error[:, JOINT_NAMES.index("left_hand")].max() < 1e-5
+    assert error.max() < 0.005  # metres: the default length_tolerance
+    channels = text_channels(path)
+    assert channels["left_hand"] == 6 and "right_knee" not in channels
+
+
+def text_channels(path) -> dict[str, int]:
+    """The joints of a BVH file with more than three channels, and how many."""
+    out, name = {}, None
+    for line in path.read_text().split("MOTION")[0].splitlines():
+        words = line.split()
+        if words and words[0] in ("ROOT", "JOINT"):
+            name = words[1]
+        elif words and words[0] == "CHANNELS" and int(words[1]) > 3:
+            out[name] = int(words[1])
+    return out
 
 
 def test_no_pose_at_all_skips_bvh_with_a_warning(tmp_path, caplog):

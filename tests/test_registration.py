@@ -319,8 +319,8 @@ def test_one_point_each(register):
         warnings.simplefilter("ignore", ConvergenceWarning)
         res = register([[0.0, 0.0, 0.0]], [[0.1, 0.2, 0.3]])
     assert np.all(np.isfinite(res.moved)) and res.moved.shape == (1, 3)
-    if register is not register_affine:  # affine is under-determined by one point
-        np.testing.assert_allclose(res.moved, [[0.1, 0.2, 0.3]], atol=1e-3)
+    # affine too: one source point has no spread, so B = I and only t is fitted
+    np.testing.assert_allclose(res.moved, [[0.1, 0.2, 0.3]], atol=1e-3)
 
 
 @pytest.mark.parametrize("register", [register_rigid, register_affine, register_nonrigid])
@@ -334,6 +334,86 @@ def test_coincident_points(register):
     src = np.repeat(rng.normal(size=(10, 3)), 3, axis=0)
     res = register(src, src[::3] + 0.01)
     assert np.all(np.isfinite(res.moved))
+
+
+_ONE_SRC = np.array([[0.10, -0.60, 2.80]])  # metres, 2.8 m in front of the camera
+_ONE_TGT = np.array([[0.11, -0.62, 2.79]])  # 24.5 mm from the source point
+_REGISTERS = [
+    pytest.param(register_nonrigid, {}, id="nonrigid"),
+    pytest.param(register_nonrigid, {"low_rank": None, "accelerate": False}, id="exact"),
+    pytest.param(register_rigid, {}, id="rigid"),
+    pytest.param(register_affine, {}, id="affine"),
+]
+
+
+def _in_metres_and_millimetres(register, source, target, options):
+    """Both runs (metres, millimetres): the same to a nanometre (0.1 um for the fast
+    nonrigid defaults, as in test_scaling_with_the_default_fast_path), same iterations."""
+    m = register(source, target, **options)
+    mm = register(source * 1000, target * 1000, **options)
+    assert mm.iterations == m.iterations and mm.converged == m.converged
+    fast = register is register_nonrigid and options.get("low_rank", "auto") == "auto"
+    np.testing.assert_allclose(mm.moved / 1000, m.moved, rtol=0, atol=1e-7 if fast else 1e-9)
+    assert mm.sigma2 / 1e6 == pytest.approx(m.sigma2, rel=1e-6)
+    if m.matrix is not None:
+        np.testing.assert_allclose(mm.matrix, m.matrix, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(mm.translation / 1000, m.translation, rtol=0, atol=1e-9)
+    return m
+
+
+@pytest.mark.parametrize("case", ["one", "twenty", "jittered"])
+@pytest.mark.parametrize(("register", "options"), _REGISTERS)
+def test_single_point_sets_land_on_the_target_in_any_unit(register, options, case):
+    # the target has no spread: exactly 0 (one point), rounding of its mean (copies),
+    # or a picometre of jitter at 2.8 m; the source is one point too (a translation)
+    count = {"one": 1, "twenty": 20, "jittered": 50}[case]
+    src, tgt = np.repeat(_ONE_SRC, count, axis=0), np.repeat(_ONE_TGT, count, axis=0)
+    if case == "jittered":
+        rng = np.random.default_rng(0)
+        src, tgt = src + rng.normal(0, 1e-12, src.shape), tgt + rng.normal(0, 1e-12, tgt.shape)
+    res = _in_metres_and_millimetres(register, src, tgt, options)  # warnings are errors
+    assert res.converged and res.iterations < 20
+    assert np.abs(res.moved - _ONE_TGT).max() < 1e-6  # on the target to a micrometre
+    assert res.sigma2 < 1e-10  # below (10 um)^2
+    if res.matrix is not None:  # a single source point: no rotation, scale or shear
+        np.testing.assert_allclose(res.matrix, np.eye(3), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(res.translation, (_ONE_TGT - _ONE_SRC)[0], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize(("register", "options"), _REGISTERS)
+def test_one_sided_single_points_do_not_depend_on_units(register, options, body):
+    # a whole body onto 30 copies of one point, and 30 copies of one point onto a body
+    many_to_one = _in_metres_and_millimetres(
+        register, body, np.repeat(_ONE_TGT, 30, axis=0), options
+    )
+    if register is not register_nonrigid:  # the linear fits shrink the body onto it
+        assert np.abs(many_to_one.moved - _ONE_TGT).max() < 1e-6
+        np.testing.assert_allclose(many_to_one.matrix, 0.0, atol=1e-12)
+    one_to_many = _in_metres_and_millimetres(
+        register, np.repeat(_ONE_SRC, 30, axis=0), body, {**options, "outlier_weight": 0.0}
+    )
+    # without outliers the single source point lands at the body's centroid (with the
+    # default w = 0.1 the far points weigh less), with an identity matrix; nonrigid
+    # stops 6 mm short of its 1.6 m move (the regularizer lambda sigma^2 |W|^2)
+    tol = 0.01 if register is register_nonrigid else 1e-6
+    assert np.abs(one_to_many.moved - body.mean(axis=0)).max() < tol
+    if one_to_many.matrix is not None:
+        np.testing.assert_allclose(one_to_many.matrix, np.eye(3), rtol=0, atol=1e-12)
+
+
+def test_affine_with_a_planar_source_in_any_unit():
+    # every source point at z = 2.8 m: B's z column is undetermined (the system is
+    # singular); it must stay the identity's, not blow up (it was 1e17 and 4.8 m off)
+    rng = np.random.default_rng(0)
+    src = np.column_stack([rng.uniform(-0.3, 0.3, 60), rng.uniform(-0.8, 0.8, 60)])
+    src = np.column_stack([src, np.full(60, 2.8)])
+    b = np.array([[1.1, 0.1, 0.0], [-0.05, 0.95, 0.0], [0.0, 0.0, 1.0]])
+    shift = np.array([0.02, -0.01, 0.03])
+    res = _in_metres_and_millimetres(register_affine, src, src @ b.T + shift, {})
+    assert np.abs(res.moved - (src @ b.T + shift)).max() < 1e-6
+    np.testing.assert_allclose(res.matrix, b, rtol=0, atol=1e-6)
+    off_plane = np.array([[0.1, 0.2, 2.9], [-0.2, 0.5, 2.6]])  # 10-20 cm off the plane
+    assert np.abs(res.apply(off_plane) - (off_plane @ b.T + shift)).max() < 1e-6
 
 
 @pytest.mark.parametrize("register", [register_rigid, register_affine, register_nonrigid])

@@ -90,6 +90,19 @@ def test_limb_bones_keep_their_calibrated_lengths(sequence):
         np.testing.assert_allclose(lengths, calibrated[i], atol=1e-6)  # metres
 
 
+def test_depth_in_millimetres_as_metres_gets_a_units_hint(sequence):
+    frame = sequence.frames[5]
+    wrong = DepthFrame(frame.depth * 1000.0, frame.intrinsics, index=5)  # mm as metres
+    result = PoseTracker(K).process(wrong)
+    assert result.status is FrameStatus.NO_PERSON
+    assert "given as metres" in result.message and "DepthFrame.from_raw" in result.message
+    # A frame that truly shows nobody gets no such hint.
+    empty = DepthFrame(np.where(frame.depth > 0, 0.0, 3.0).astype(np.float32), K, index=6)
+    assert "from_raw" not in PoseTracker(K).process(empty).message
+    with pytest.raises(ValueError, match="'intrinsics' argument of PoseTracker.reset"):
+        PoseTracker(K).reset("kinect1-qvga")
+
+
 def _bad_frames(index):
     zeros = np.zeros(K.shape, np.float32)
     nan = np.full(K.shape, np.nan, np.float32)
@@ -219,7 +232,8 @@ def test_appearance_weight_zero_is_the_pure_tracker(sequence):
     from posedrift.labelling import BodyPartForest
 
     forest = BodyPartForest.load_default()
-    frames = sequence.frames[:8]
+    # The T-pose, then frames in motion (during the held T-pose both agree anyway).
+    frames = [sequence.frames[0], *sequence.frames[30:44:2]]
     pure = _run(PoseTracker(K, forest=PredictOnly(forest)), frames)
     zero = _run(PoseTracker(K, forest=forest, appearance_weight=0.0), frames)
     fused = _run(PoseTracker(K, forest=forest), frames)

@@ -1,4 +1,5 @@
-"""The UTD-MHAD loader on the real data: the reference must land on the person."""
+"""The UTD-MHAD loader: on the real data the reference must land on the person; crafted
+files check that bad files are named and odd names reported."""
 
 import shutil
 
@@ -10,8 +11,6 @@ from posedrift.camera import backproject, project
 from posedrift.evaluation import find_utd_sequences, kinect20_to_joints, load_utd_sequence
 from posedrift.skeleton import JOINT_INDEX
 
-pytestmark = pytest.mark.data
-
 
 @pytest.fixture(scope="module")
 def swipe(utd_dir):
@@ -20,6 +19,7 @@ def swipe(utd_dir):
     return load_utd_sequence(*by_name["a1_s1_t1"])
 
 
+@pytest.mark.data
 def test_find_pairs_all_sequences(utd_dir):
     found, skipped = find_utd_sequences(utd_dir)
     assert len(found) == 216 and skipped == []
@@ -27,6 +27,7 @@ def test_find_pairs_all_sequences(utd_dir):
     assert found[1][0] == "a1_s1_t2"
 
 
+@pytest.mark.data
 def test_reference_projects_onto_the_silhouette(swipe):
     k = swipe.frames[0].intrinsics
     inside = []
@@ -44,6 +45,7 @@ def test_reference_projects_onto_the_silhouette(swipe):
     assert 0.0 < torso[2] - np.median(pts[:, 2]) < 0.25
 
 
+@pytest.mark.data
 def test_unmirrored_geometry_puts_the_right_arm_on_the_image_left(swipe):
     # a1 is a right-arm swipe; after un-mirroring, a person facing the camera has
     # their right side at smaller X (image left) and the moving wrist is the right one.
@@ -58,6 +60,7 @@ def test_unmirrored_geometry_puts_the_right_arm_on_the_image_left(swipe):
     assert swipe.frames[0].intrinsics.cx == 159.0
 
 
+@pytest.mark.data
 def test_mirrored_option_is_the_exact_mirror(utd_dir, swipe):
     found, _ = find_utd_sequences(utd_dir)
     d, s = next((d, s) for n, d, s in found if n == "a1_s1_t1")
@@ -81,6 +84,7 @@ def test_torso_is_the_neck_pelvis_midpoint():
         kinect20_to_joints(np.zeros((3, 15, 3)))
 
 
+@pytest.mark.data
 def test_bad_files_are_named(tmp_path, utd_dir):
     (tmp_path / "Depth").mkdir()
     (tmp_path / "Skeleton").mkdir()
@@ -101,3 +105,116 @@ def test_bad_files_are_named(tmp_path, utd_dir):
         load_utd_sequence(tmp_path / "nothing_depth.mat", short)
     with pytest.raises(ValueError, match="no 'a\\*_s\\*_t\\*_depth.mat' files"):
         find_utd_sequences(tmp_path / "Skeleton")
+
+
+# --- crafted files (no data needed): empty, untracked, odd names, repeats, limit ----------------
+
+
+def _standing(frames):
+    """A (20, 3, T) Kinect skeleton about 3 m in front of the sensor (metres)."""
+    rng = np.random.default_rng(1)
+    joints = rng.normal(scale=0.3, size=(20, 3)) + [0.0, 0.0, 3.0]
+    return np.repeat(joints[:, :, None], frames, axis=2)
+
+
+def _write_utd(root, name, *, frames=3, depth=None, skel=None, skel_name=None):
+    """Write ``Depth/{name}_depth.mat`` and ``Skeleton/{skel_name}_skeleton.mat`` (skel=False:
+    no skeleton file); returns (depth path, skeleton path)."""
+    from scipy.io import savemat
+
+    (root / "Depth").mkdir(exist_ok=True)
+    (root / "Skeleton").mkdir(exist_ok=True)
+    if depth is None:
+        depth = np.zeros((240, 320, frames), np.uint16)
+        depth[60:200, 140:180] = 3000
+    depth_path = root / "Depth" / f"{name}_depth.mat"
+    savemat(str(depth_path), {"d_depth": depth}, do_compression=True)
+    skel_path = root / "Skeleton" / f"{skel_name or name}_skeleton.mat"
+    if skel is not False:
+        savemat(str(skel_path), {"d_skel": _standing(frames) if skel is None else skel})
+    return depth_path, skel_path
+
+
+def test_empty_files_are_rejected_naming_the_file(tmp_path):
+    good_depth, good_skel = _write_utd(tmp_path, "a1_s1_t1")
+    assert len(load_utd_sequence(good_depth, good_skel).frames) == 3
+    empty_depth, _ = _write_utd(tmp_path, "a3_s1_t1", depth=np.zeros((240, 320, 0), np.uint16))
+    with pytest.raises(ValueError, match=r"a3_s1_t1_depth.mat' holds no frames .*\(240, 320, 0\)"):
+        load_utd_sequence(empty_depth, good_skel)
+    _, empty_skel = _write_utd(tmp_path, "a4_s1_t1", skel=np.zeros((20, 3, 0)))
+    with pytest.raises(ValueError, match=r"a4_s1_t1_skeleton.mat' holds no frames"):
+        load_utd_sequence(good_depth, empty_skel)
+
+
+@pytest.mark.parametrize("fill", [0.0, np.nan, np.inf])
+def test_reference_without_a_tracked_frame_is_rejected(tmp_path, fill):
+    depth, skel = _write_utd(tmp_path, "a4_s1_t1", skel=np.full((20, 3, 3), fill))
+    with pytest.raises(ValueError, match=r"a4_s1_t1_skeleton.mat' has no usable frame"):
+        load_utd_sequence(depth, skel)
+    # One tracked frame is enough: the untracked ones become NaN.
+    partly = _standing(3)
+    partly[:, :, [0, 2]] = fill
+    depth, skel = _write_utd(tmp_path, "a5_s1_t1", skel=partly)
+    joints = load_utd_sequence(depth, skel).reference.joints
+    assert np.isnan(joints[[0, 2]]).all() and np.isfinite(joints[1]).all()
+
+
+def test_names_in_any_case_and_odd_names_reported(tmp_path):
+    upper, _ = _write_utd(tmp_path, "A1_S1_T1", skel_name="a1_s1_t1")  # paired in any case
+    copy, copy_skel = _write_utd(tmp_path, "a5_s1_t1 (copy)")
+    _write_utd(tmp_path, "a2_s1_t1")
+    (tmp_path / "Skeleton" / "a2_s1_t1_skeleton.mat").rename(
+        tmp_path / "Skeleton" / "A2_S1_T1_SKELETON.MAT"
+    )
+    _, orphan = _write_utd(tmp_path, "a9_s1_t1")
+    (tmp_path / "Depth" / "a9_s1_t1_depth.mat").unlink()  # a skeleton without depth
+    junk = tmp_path / "Skeleton" / "junk_skeleton.mat"
+    junk.write_bytes(b"")
+    reported = []
+    found, skipped = find_utd_sequences(tmp_path, on_ignored=lambda *a: reported.append(a))
+    assert [(n, d.name, s.name) for n, d, s in found] == [
+        ("A1_S1_T1", "A1_S1_T1_depth.mat", "a1_s1_t1_skeleton.mat"),
+        ("a2_s1_t1", "a2_s1_t1_depth.mat", "A2_S1_T1_SKELETON.MAT"),
+    ]
+    assert skipped == []
+    # Each odd file named once (the copy's skeleton goes with its depth file).
+    assert [item for item, _ in reported] == [str(copy), str(orphan), str(junk)]
+    assert "does not follow a<action>_s<subject>_t<trial>_depth.mat" in reported[0][1]
+    assert "'a5_s1_t1 (copy)'" in reported[0][1] and "no depth file" in reported[1][1]
+    # Without a callback: one RuntimeWarning per file.
+    with pytest.warns(RuntimeWarning) as caught:
+        find_utd_sequences(tmp_path)
+    assert [str(w.message) for w in caught] == [f"{item}: {why}" for item, why in reported]
+    # Asked for by name: the odd file is a sequence; case-insensitive; repeats count once.
+    reported.clear()
+    found, skipped = find_utd_sequences(
+        tmp_path,
+        names=["a5_s1_t1 (copy)", "a1_s1_t1", "A1_S1_T1", "a5_s1_t1 (copy)", "a7_s1_t1"],
+        on_ignored=lambda *a: reported.append(a),
+    )
+    assert [(n, d, s) for n, d, s in found] == [
+        ("a5_s1_t1 (copy)", copy, copy_skel),
+        ("A1_S1_T1", upper, tmp_path / "Skeleton" / "a1_s1_t1_skeleton.mat"),
+    ]
+    assert skipped == [("a7_s1_t1", "no such sequence in the folder")]
+    assert reported == [
+        ("A1_S1_T1", "the same file as 'a1_s1_t1' (A1_S1_T1_depth.mat): taken once"),
+        ("a5_s1_t1 (copy)", "named more than once: taken once"),
+    ]
+
+
+def test_limit_counts_sequences_in_order_paired_or_not(tmp_path):
+    for name in ("a1_s1_t1", "a3_s1_t1"):
+        _write_utd(tmp_path, name)
+    _write_utd(tmp_path, "a2_s1_t1", skel=False)
+    found, skipped = find_utd_sequences(tmp_path, limit=1)
+    assert [f[0] for f in found] == ["a1_s1_t1"] and skipped == []
+    found, skipped = find_utd_sequences(tmp_path, limit=2)
+    assert [f[0] for f in found] == ["a1_s1_t1"]
+    assert skipped == [
+        ("a2_s1_t1", f"no skeleton file {str(tmp_path / 'Skeleton' / 'a2_s1_t1_skeleton.mat')!r}")
+    ]
+    found, skipped = find_utd_sequences(tmp_path, names=["a3_s1_t1", "a2_s1_t1"], limit=1)
+    assert [f[0] for f in found] == ["a3_s1_t1"] and skipped == []
+    with pytest.raises(ValueError, match="'limit' argument must be at least 1. Got 0"):
+        find_utd_sequences(tmp_path, limit=0)

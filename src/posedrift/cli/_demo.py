@@ -9,6 +9,7 @@ from typing import Annotated
 import typer
 
 from posedrift.cli._app import app, fail, progress_enabled
+from posedrift.cli._eval import _METHODS_HELP as METHODS_HELP
 
 DEMO_METHODS = "cpd,shotton,pda"
 
@@ -21,12 +22,7 @@ def demo(
     frames: Annotated[
         int, typer.Option("--frames", min=2, help="Frames of the built-in motion to track.")
     ] = 300,
-    methods: Annotated[
-        str,
-        typer.Option(
-            "--methods", help="Methods side by side: cpd, shotton, pda, icp (and ablations)."
-        ),
-    ] = DEMO_METHODS,
+    methods: Annotated[str, typer.Option("--methods", help=METHODS_HELP)] = DEMO_METHODS,
     noise: Annotated[bool, typer.Option("--noise", help="Kinect-like depth noise.")] = False,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the noise.")] = 0,
 ) -> None:

@@ -102,7 +102,9 @@ def eval_synthetic(
     Each clip is resampled to 30 fps, starts from a T-pose, and is rendered at
     320 x 240 with the person 2.8 m away; the methods see only the depth frames.
     Prints the table in Markdown; a clip that cannot be read or mapped is named,
-    skipped, and makes the exit status 1.
+    skipped, and makes the exit status 1. A source given twice (the same file) is
+    evaluated once; files of the same name in different folders get distinct
+    sequence names (x, x-2, ...), each said on standard error.
 
     Example: posedrift eval synthetic builtin ../shared/data/mocap/cmu/002_05.bvh
     --frames 500 --methods cpd,shotton,pda,icp --json table1.json --figures figs
@@ -117,8 +119,7 @@ def eval_synthetic(
         raise fail(str(exc)) from exc
     _check_outputs(json_out, figures)
     sequences, skipped = [], []
-    for i, source in enumerate(sources):
-        label = Path(source).stem if source != "builtin" else "builtin"
+    for i, (source, label) in enumerate(_name_sources(sources)):
         try:
             motion = _load_source(source)  # its errors start with the file's name
             if progress_enabled():
@@ -136,6 +137,11 @@ def eval_synthetic(
         sequences.append(seq)
     if not sequences:
         _finish_empty(skipped, json_out, "synthetic")
+
+    def unusable(name: str, reason: str) -> None:
+        typer.echo(f"error: skipped {name}: {reason}", err=True)
+        skipped.append({"sequence": name, "reason": reason})
+
     try:
         report = evaluate(
             sequences,
@@ -144,12 +150,56 @@ def eval_synthetic(
             progress=progress_enabled(),
             figures_dir=figures,
             protocol="synthetic",
+            on_skip=unusable,
         )
     except ValueError as exc:
+        if str(exc).startswith("No sequence"):
+            _finish_empty(skipped, json_out, "synthetic")
         raise fail(str(exc)) from exc
     report["noise"] = bool(noise)
     report["in_place"] = bool(in_place)
     _finish(report, skipped, json_out, paper)
+
+
+def _name_sources(sources: list[str]) -> list[tuple[str, str]]:
+    """(source, sequence name) of each distinct source, in order.
+
+    A source naming a file already given (``x.bvh``, ``./x.bvh``) is dropped;
+    distinct files with the same stem are named ``x``, ``x-2``, ``x-3``... (a name
+    no other source has as its stem). Each drop and rename is said on stderr.
+    """
+
+    def stem(source: str) -> str:
+        return "builtin" if source == "builtin" else Path(source).stem
+
+    def identity(source: str) -> str:
+        return "builtin" if source == "builtin" else str(Path(source).resolve())
+
+    stems = {stem(s) for s in sources}
+    first: dict[str, str] = {}  # identity -> the source first naming it
+    owner: dict[str, str] = {}  # sequence name -> source
+    named: list[tuple[str, str]] = []
+    for source in sources:
+        key = identity(source)
+        if key in first:
+            typer.echo(
+                f"warning: {source} is given more than once (as {first[key]}): evaluated once",
+                err=True,
+            )
+            continue
+        first[key] = source
+        label = stem(source)
+        if label in owner:
+            base, k = label, 2
+            while f"{base}-{k}" in owner or f"{base}-{k}" in stems:
+                k += 1
+            label = f"{base}-{k}"
+            typer.echo(
+                f"note: {source} is evaluated as {label!r} ({owner[base]} is {base!r})", err=True
+            )
+        owner[label] = source
+        named.append((source, label))
+    return named
 
 
 def _finish_empty(skipped: list[dict], json_out: Path | None, protocol: str) -> None:
@@ -205,9 +255,16 @@ def eval_utd(
     by default every method's joints are moved to the Kinect convention by fixed
     offsets fitted once on development recordings (posedrift.skeleton.to_convention);
     the JSON keeps the unconverted errors under "native". Images are un-mirrored
-    before the methods see them. A sequence
-    whose skeleton file is missing, unreadable or shorter than its depth is named,
+    before the methods see them. A sequence whose files are missing, unreadable,
+    empty, or whose skeleton is shorter than its depth or never tracked, is named,
     skipped, and makes the exit status 1.
+
+    Sequences are the files a<action>_s<subject>_t<trial>_depth.mat (any case) with
+    their _skeleton.mat. Other *_depth.mat / *_skeleton.mat files (e.g. "a5_s1_t1
+    (copy)_depth.mat") are named in a warning and left out, without changing the
+    exit status; --sequences "a5_s1_t1 (copy)" evaluates one. A name repeated in
+    --sequences is evaluated once. --limit counts the sequences in order, usable
+    or not.
 
     Example: posedrift eval utd ../shared/data/utd-mhad --limit 10 --json utd.json
     """
@@ -228,24 +285,29 @@ def eval_utd(
     except ValueError as exc:
         raise fail(str(exc)) from exc
     _check_outputs(json_out, figures)
+    wanted = None
+    if sequences is not None:
+        wanted = [s.strip() for s in sequences.split(",") if s.strip()]
+        if not wanted:
+            raise fail(
+                f"--sequences {sequences!r} names no sequence: give comma-separated names, "
+                "e.g. a1_s1_t1,a6_s2_t1."
+            )
+
+    def ignored(item: str, reason: str) -> None:
+        typer.echo(f"warning: {item}: {reason}", err=True)
+
     try:
-        found, missing = find_utd_sequences(root)
+        found, missing = find_utd_sequences(root, names=wanted, limit=limit, on_ignored=ignored)
     except ValueError as exc:
         raise fail(str(exc)) from exc
     skipped = [{"sequence": n, "reason": r} for n, r in missing]
-    if sequences is not None:
-        wanted = [s.strip() for s in sequences.split(",") if s.strip()]
-        by_name = {f[0]: f for f in found}
-        known = {n for n, _ in missing}
-        for name in wanted:
-            if name not in by_name and name not in known:
-                skipped.append({"sequence": name, "reason": "no such sequence in the folder"})
-        skipped = [s for s in skipped if s["sequence"] in wanted]
-        found = [by_name[n] for n in wanted if n in by_name]
-    if limit is not None:
-        found = found[:limit]
     for item in skipped:
         typer.echo(f"error: skipped {item['sequence']}: {item['reason']}", err=True)
+
+    def unusable(name: str, reason: str) -> None:
+        typer.echo(f"error: skipped {name}: {reason}", err=True)
+        skipped.append({"sequence": name, "reason": reason})
 
     def loaded():
         for name, depth, skel in found:
@@ -268,9 +330,10 @@ def eval_utd(
             figures_dir=figures,
             protocol="utd",
             convention=convention,
+            on_skip=unusable,
         )
     except ValueError as exc:
-        if "No sequence" in str(exc):
+        if str(exc).startswith("No sequence"):
             _finish_empty(skipped, json_out, "utd")
         raise fail(str(exc)) from exc
     _finish(report, skipped, json_out, paper)

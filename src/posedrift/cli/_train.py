@@ -74,16 +74,18 @@ def train(
             "--min-pose-distance",
             min=0.0,
             help="Drop clip frames whose pose is within this many metres of a kept one "
-            "(every joint); 0 keeps all and weights the clips equally.",
+            "(every joint), so that each distinct pose is equally likely; 0 keeps all "
+            "frames and weights the clips equally.",
         ),
-    ] = 0.0,
+    ] = 0.05,
 ) -> None:
     """Train a body-part forest on rendered synthetic depth frames (needs scikit-learn).
 
-    Poses come from the BVH clips (all but the held-out ones) and the procedural
-    motion, bodies of varied height, girth and build, views within 45 degrees of
-    frontal at 2-3.5 m and (--wide-share of the frames) wider views up to --wide-yaw
-    degrees from frontal at 1-4.5 m, Kinect-like noise on half of the frames.
+    Poses come from the BVH clips (all but the held-out ones; near-duplicate poses
+    dropped, --min-pose-distance) and the procedural motion, bodies of varied height,
+    girth and build, views within 45 degrees of frontal at 2-3.5 m and (--wide-share
+    of the frames) wider views up to --wide-yaw degrees from frontal at 1-4.5 m,
+    Kinect-like noise on half of the frames.
 
     Example: posedrift train --frames 2000 --seed 0 --out forest.npz
     """
@@ -104,6 +106,12 @@ def train(
     started = time.perf_counter()
     try:
         paths = tr.training_clips(mocap, exclude=exclude)
+        if mocap is not None and not paths:
+            typer.echo(
+                f"warning: no BVH clip to train on in {mocap} (after --exclude); "
+                f"training on the procedural motion only.",
+                err=True,
+            )
         with tr._progress(progress_enabled(), "loading motions", len(paths) + 1) as advance:
             motions = tr.load_training_motions(paths, on_motion=lambda _: advance())
         render_rng, fit_rng = (

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import time
+import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -161,6 +162,8 @@ class EvaluationRun:
     methods: list[str]
     runs: dict[tuple[str, str], MethodRun]
     forest: Any = None
+    skipped: list[tuple[str, str]] = field(default_factory=list)
+    """(name, reason) of each sequence left out (see :func:`run_methods`)."""
 
 
 def label_hits(result: FrameResult, labels: np.ndarray, intrinsics: Intrinsics) -> tuple[int, int]:
@@ -208,6 +211,39 @@ def _progress(enabled: bool, total: int):
     )
 
 
+def unusable_reason(sequence: EvaluationSequence, done: Iterable[str] = ()) -> str | None:
+    """Why a sequence cannot be evaluated, or None if it can.
+
+    A sequence cannot be evaluated if it has no frames, if no frame of its
+    reference has all 15 joints finite (every error would be undefined), or if its
+    name is among ``done`` (the names already evaluated: a second sequence of the
+    same name would overwrite the first one's results).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from posedrift.evaluation import EvaluationSequence, Reference
+    >>> empty = Reference(joints=np.zeros((0, 15, 3)), angles=np.zeros((0, 8)))
+    >>> unusable_reason(EvaluationSequence(name="x", frames=(), reference=empty))
+    'it has no frames'
+    """
+    if len(sequence.frames) == 0:
+        return "it has no frames"
+    joints = np.asarray(sequence.reference.joints, dtype=float)
+    if not np.isfinite(joints).all(axis=(1, 2)).any():
+        return (
+            f"its reference has no usable frame (in none of its {len(joints)} frames are all "
+            f"{joints.shape[1]} joints finite)"
+        )
+    if sequence.name in set(done):
+        return "a sequence of the same name was already evaluated in this run"
+    return None
+
+
+def _warn_skip(name: str, reason: str) -> None:
+    warnings.warn(f"skipped sequence {name!r}: {reason}", RuntimeWarning, stacklevel=3)
+
+
 def run_methods(
     sequences: Iterable[EvaluationSequence],
     methods: Sequence[str] | Mapping[str, MethodFactory] = DEFAULT_METHODS,
@@ -216,8 +252,14 @@ def run_methods(
     progress: bool = True,
     protocol: str | None = None,
     keep_frames: bool = False,
+    on_skip: Callable[[str, str], None] | None = None,
 ) -> EvaluationRun:
     """Run every method over every sequence, the same frames for all.
+
+    A sequence that cannot be evaluated (:func:`unusable_reason`: no frames, no
+    usable reference frame, or a name already evaluated) is left out, reported as
+    ``on_skip(name, reason)`` and listed in ``EvaluationRun.skipped``; the others
+    are still evaluated.
 
     Parameters
     ----------
@@ -235,10 +277,18 @@ def run_methods(
         ``"synthetic"`` or ``"utd"``; inferred from the references by default.
     keep_frames : bool
         Keep the depth frames in the result (for figures).
+    on_skip : callable, optional
+        ``on_skip(name, reason)`` for each sequence left out; by default a
+        ``RuntimeWarning`` naming it.
 
     Returns
     -------
     EvaluationRun
+
+    Raises
+    ------
+    ValueError
+        If no sequence could be evaluated ("No sequence to evaluate...").
     """
     if isinstance(methods, Mapping):
         factories = dict(methods)
@@ -251,9 +301,16 @@ def run_methods(
         total = sum(len(s.frames) for s in sequences) * len(factories)
     runs: dict[tuple[str, str], MethodRun] = {}
     records: list[SequenceRecord] = []
+    skipped: list[tuple[str, str]] = []
+    report_skip = _warn_skip if on_skip is None else on_skip
     with _progress(progress, total) as bar:
         task = bar.add_task("evaluating", total=total)
         for seq in sequences:
+            reason = unusable_reason(seq, (r.name for r in records))
+            if reason is not None:
+                skipped.append((seq.name, reason))
+                report_skip(seq.name, reason)
+                continue
             intrinsics = seq.frames[0].intrinsics
             labels = seq.reference.labels
             for name, factory in factories.items():
@@ -301,12 +358,21 @@ def run_methods(
                 )
             )
     if not records:
-        raise ValueError("No sequence to evaluate.")
+        raise ValueError(
+            f"No sequence to evaluate ({len(skipped)} skipped)."
+            if skipped
+            else "No sequence to evaluate."
+        )
     if protocol is None:
         kinds = {r.reference.kind for r in records}
         protocol = "synthetic" if kinds == {"synthetic"} else "utd"
     return EvaluationRun(
-        protocol=protocol, sequences=records, methods=list(factories), runs=runs, forest=forest
+        protocol=protocol,
+        sequences=records,
+        methods=list(factories),
+        runs=runs,
+        forest=forest,
+        skipped=skipped,
     )
 
 
@@ -457,6 +523,7 @@ def evaluate(
     figures_dir: str | Path | None = None,
     protocol: str | None = None,
     convention: str = "native",
+    on_skip: Callable[[str, str], None] | None = None,
 ) -> dict:
     """Evaluate methods on sequences: the JSON of ``posedrift eval`` (``METHOD.md`` section 6).
 
@@ -476,6 +543,9 @@ def evaluate(
     convention : str
         Skeleton convention of the reference (:data:`posedrift.skeleton.CONVENTIONS`):
         the methods' joints are converted to it before scoring (see :func:`summarize`).
+    on_skip : callable, optional
+        ``on_skip(name, reason)`` for each sequence that cannot be evaluated (see
+        :func:`run_methods`); by default a ``RuntimeWarning``.
 
     Returns
     -------
@@ -495,6 +565,7 @@ def evaluate(
         progress=progress,
         protocol=protocol,
         keep_frames=figures_dir is not None,
+        on_skip=on_skip,
     )
     report = summarize(run, convention=convention)
     if figures_dir is not None:
@@ -517,4 +588,5 @@ __all__ = [
     "parse_methods",
     "run_methods",
     "summarize",
+    "unusable_reason",
 ]

@@ -16,7 +16,9 @@ constant over the sequence (the tracker keeps its calibrated lengths).
 shrug, head nod) one rotation cannot follow; their children therefore also
 carry ``Xposition Yposition Zposition`` channels that hold the child's full
 local offset (the channel values replace the OFFSET, as Blender and bvhio read
-them), so they are reproduced exactly whatever the lengths.
+them), so they are reproduced exactly whatever the lengths. So does any joint whose
+bone length varies over the sequence by more than ``length_tolerance`` (joints
+moved to another convention, e.g. the Kinect SDK's, whose bones stretch).
 """
 
 from __future__ import annotations
@@ -137,8 +139,29 @@ def _euler_zxy(matrix: np.ndarray) -> np.ndarray:
     return Rotation.from_matrix(matrix).as_euler("ZXY", degrees=True)
 
 
-def motion_channels(joints_bvh: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """Per-frame channel values ``(T, C)`` in file order for joints in the BVH frame."""
+def positioned_joints(joints_bvh: np.ndarray, tolerance_cm: float) -> np.ndarray:
+    """``(15,)`` bool: the joints written with position channels.
+
+    The children of a branching joint, and every joint whose bone length (in the
+    BVH frame, centimetres) strays from its median by more than ``tolerance_cm``.
+    """
+    out = np.array(_BRANCH_CHILD)
+    for j, p in enumerate(JOINT_PARENTS):
+        if p >= 0:
+            length = np.linalg.norm(joints_bvh[:, j] - joints_bvh[:, p], axis=-1)
+            out[j] |= bool(np.max(np.abs(length - np.median(length))) > tolerance_cm)
+    return out
+
+
+def motion_channels(
+    joints_bvh: np.ndarray, offsets: np.ndarray, positioned: np.ndarray | None = None
+) -> np.ndarray:
+    """Per-frame channel values ``(T, C)`` in file order for joints in the BVH frame.
+
+    ``positioned`` (default: the children of branching joints) marks the joints
+    that carry position channels (:func:`positioned_joints`).
+    """
+    positioned = np.array(_BRANCH_CHILD) if positioned is None else positioned
     rows = []
     for frame in joints_bvh:
         rotation = {}
@@ -159,7 +182,7 @@ def motion_channels(joints_bvh: np.ndarray, offsets: np.ndarray) -> np.ndarray:
             rotation[j] = world
             if p < 0:
                 values.extend(frame[j])
-            elif _BRANCH_CHILD[j]:
+            elif positioned[j]:
                 values.extend(parent_rotation.T @ (frame[j] - frame[p]))
             values.extend(_euler_zxy(parent_rotation.T @ world))
         rows.append(values)
@@ -182,6 +205,7 @@ def write_bvh(
     path: str | Path,
     *,
     fps: float = 30.0,
+    length_tolerance: float = 0.005,
 ) -> tuple[Path, np.ndarray]:
     """Write a ``(T, 15, 3)`` camera-frame joint sequence as BVH.
 
@@ -193,6 +217,10 @@ def write_bvh(
         The ``.bvh`` file to write.
     fps : float
         Frames per second (``Frame Time`` is ``1 / fps``).
+    length_tolerance : float
+        Metres: a bone whose length strays further than this from its median gets
+        position channels on its child joint, so that the file reproduces the joints
+        exactly (the tracker's native limb lengths are constant and need none).
 
     Returns
     -------
@@ -225,6 +253,7 @@ def write_bvh(
     filled, held = fill_unknown_frames(joints)
     in_bvh = camera_to_bvh(filled)
     offsets = bone_offsets(in_bvh)
+    positioned = positioned_joints(in_bvh, _CM * length_tolerance)
     height_cm = float(
         np.median(
             in_bvh[:, JOINT_NAMES.index("head"), 1] - in_bvh[:, JOINT_NAMES.index("right_foot"), 1]
@@ -239,7 +268,7 @@ def write_bvh(
         lines.append(f"{pad}{keyword} {JOINT_NAMES[j]}")
         lines.append(f"{pad}{{")
         lines.append(f"{pad}  OFFSET " + " ".join(f"{v:.6f}" for v in offsets[j]))
-        if JOINT_PARENTS[j] < 0 or _BRANCH_CHILD[j]:
+        if JOINT_PARENTS[j] < 0 or positioned[j]:
             channels = "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"
         else:
             channels = "CHANNELS 3 Zrotation Xrotation Yrotation"
@@ -255,7 +284,7 @@ def write_bvh(
         lines.append(f"{pad}}}")
 
     emit(_ROOT, 0)
-    channels = motion_channels(in_bvh, offsets)
+    channels = motion_channels(in_bvh, offsets, positioned)
     lines.append("MOTION")
     lines.append(f"Frames: {len(channels)}")
     lines.append(f"Frame Time: {1.0 / fps:.8f}")

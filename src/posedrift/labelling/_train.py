@@ -867,15 +867,23 @@ HELD_OUT_CLIPS: tuple[str, ...] = ("007_*", "131_03*")
 def training_clips(
     mocap_dir: str | Path | None, *, exclude: Sequence[str] = HELD_OUT_CLIPS
 ) -> list[Path]:
-    """The BVH files under ``mocap_dir`` (recursively) whose names match no ``exclude`` glob."""
+    """The BVH files under ``mocap_dir`` whose names match no ``exclude`` glob.
+
+    ``mocap_dir`` is a folder (searched recursively; ``.bvh`` in any letter case) or
+    one BVH file.
+    """
     import fnmatch
 
     if mocap_dir is None:
         return []
     root = Path(mocap_dir)
-    if not root.is_dir():
-        raise ValueError(f"The motion capture folder {root} does not exist.")
-    paths = sorted(root.rglob("*.bvh"))
+    if root.is_file() and root.suffix.lower() == ".bvh":
+        paths = [root]
+    elif root.is_dir():
+        paths = sorted(p for p in root.rglob("*") if p.suffix.lower() == ".bvh" and p.is_file())
+    else:
+        what = "is not a BVH file or a folder" if root.exists() else "does not exist"
+        raise ValueError(f"The motion capture path {str(root)!r} {what}.")
     return [p for p in paths if not any(fnmatch.fnmatch(p.name, pat) for pat in exclude)]
 
 

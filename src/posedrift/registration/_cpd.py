@@ -234,16 +234,57 @@ def _check_common(name, source, target, outlier_weight, tol, max_iter, dtype, wa
     return src, tgt, w, tol, max_iter, dt
 
 
-def _normalization(target: np.ndarray, normalize: bool) -> tuple[np.ndarray, float]:
-    """One similarity for both sets: the target's centroid and RMS radius."""
+_DEGENERATE_RTOL = 1e-9  # a set whose RMS radius is below this share of its largest coordinate
+
+
+def _rms_radius(points: np.ndarray, centre: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum((points - centre) ** 2, axis=1))))
+
+
+def _magnitude(points: np.ndarray) -> float:
+    return float(np.abs(points).max())
+
+
+def _is_single_point(points: np.ndarray) -> bool:
+    """Whether all points coincide up to rounding (relative to their coordinates)."""
+    spread = _rms_radius(points, points.mean(axis=0))
+    return not spread > _DEGENERATE_RTOL * _magnitude(points)
+
+
+def _normalization(
+    target: np.ndarray, source: np.ndarray, normalize: bool
+) -> tuple[np.ndarray, float, bool, bool]:
+    """One similarity for both sets, and whether each set is a single point.
+
+    The similarity maps the target's centroid to 0 and its RMS radius to 1. A target
+    whose RMS radius is at most ``_DEGENERATE_RTOL`` times its largest absolute
+    coordinate (all points coincide, up to rounding) has no usable radius: the unit is
+    then the RMS distance of the source points to it, or, when the source is that same
+    point too, the largest absolute coordinate of either set (1 when all are 0). Every
+    choice scales with the input, so results do not depend on units.
+
+    Returns
+    -------
+    centre : (D,) float
+    unit : float
+    target_point, source_point : bool
+        Whether the target (source) points all coincide up to rounding.
+    """
     d = target.shape[1]
-    if not normalize:
-        return np.zeros(d), 1.0
     centre = target.mean(axis=0)
     unit = float(np.sqrt(np.mean(np.sum((target - centre) ** 2, axis=1))))
+    target_point = not unit > _DEGENERATE_RTOL * _magnitude(target)
+    source_point = _is_single_point(source)
+    if not normalize:
+        return np.zeros(d), 1.0, target_point, source_point
+    if target_point:
+        unit = _rms_radius(source, centre)
+        magnitude = max(_magnitude(target), _magnitude(source))
+        if not unit > _DEGENERATE_RTOL * magnitude:  # source and target: one point
+            unit = magnitude if magnitude > 0.0 else 1.0
     if not np.isfinite(unit) or unit <= 0.0:
         unit = 1.0
-    return centre, unit
+    return centre, unit, target_point, source_point
 
 
 def _start_sigma2(tgt_n, moved_n, warm_start, unit, floor):
@@ -307,7 +348,12 @@ def register_nonrigid(
     normalize : bool
         Register in coordinates where the target has zero mean and unit RMS radius (one
         similarity applied to both sets), so ``kernel_width``, ``smoothness`` and ``tol``
-        do not depend on units. Results are returned in input units.
+        do not depend on units. Results are returned in input units. A target whose
+        points all coincide (RMS radius at most 1e-9 of its largest absolute
+        coordinate: copies of one point, up to rounding) has no radius: the unit is then
+        the RMS distance of the source points to it (their common point's largest
+        absolute coordinate when the source is that same point), so the result still
+        does not depend on units; see Notes.
     low_rank : "auto", None or int
         "auto" (the default): exact up to 64 points; above, a 64-landmark Nyström
         factor ``G ~ Z Z'`` when at most 80% of the landmark kernel's eigenvalues
@@ -383,6 +429,13 @@ def register_nonrigid(
     ``smoothness`` tuned at 400 points corresponds to about ``smoothness * M / 400``
     at M points.
 
+    Degenerate sets (all points one point, up to 1e-9 of the coordinates' magnitude)
+    are registered, not rejected, with the same result in any unit: a single source
+    point (or copies of one) moves onto a single target point to rounding (a
+    translation); many source points onto a single target point are fitted as usual
+    (the nearest ones land on it, the regularizer keeps the rest coherent); a single
+    source point moves towards the target's posterior-weighted centroid.
+
     Examples
     --------
     >>> import numpy as np
@@ -410,7 +463,7 @@ def register_nonrigid(
     accelerate = bool(accelerate)
     m, d = src.shape
     n = tgt.shape[0]
-    centre, unit = _normalization(tgt, normalize)
+    centre, unit, _, _ = _normalization(tgt, src, normalize)
     tgt_n = (tgt - centre) / unit
     src_n = (src - centre) / unit
     single = dt == np.float32
@@ -602,9 +655,12 @@ def _linear_cpd(
     )
     m, d = src.shape
     n = tgt.shape[0]
-    centre, unit = _normalization(tgt, normalize)
+    centre, unit, target_point, source_point = _normalization(tgt, src, normalize)
     tgt_n = (tgt - centre) / unit
     src_n = (src - centre) / unit
+    # the source's coordinates are known to rounding: directions in which its
+    # (normalized) spread is below this are no spread at all (see _affine_matrix)
+    src_resolution = _DEGENERATE_RTOL * _magnitude(src) / unit
     tgt_e = tgt_n.astype(dt)
     mat = np.eye(d)
     t = np.zeros(d)
@@ -646,27 +702,39 @@ def _linear_cpd(
         mu_x = pt1 @ tgt_n / np_
         mu_y = p1 @ src_n / np_
         a = px.T @ src_n - np_ * np.outer(mu_x, mu_y)  # X^' P' Y^ (D x D)
+        if target_point:  # X^ is rounding noise: no direction to align with
+            a = np.zeros_like(a)
         xpx = float(pt1 @ xx) - np_ * float(mu_x @ mu_x)
         if kind == "rigid":
-            u, _, vt = np.linalg.svd(a)
-            cdiag = np.ones(d)
-            cdiag[-1] = np.linalg.det(u @ vt)
-            rot = (u * cdiag) @ vt
             ypy = float(p1 @ np.einsum("ij,ij->i", src_n, src_n)) - np_ * float(mu_y @ mu_y)
-            tr_ar = float(np.sum(a * rot))
-            s = tr_ar / ypy if (with_scale and ypy > 0) else 1.0
-            mat = s * rot
-            t = mu_x - mat @ mu_y
-            sigma2 = (xpx - s * tr_ar) / (np_ * d)
+            if source_point:  # rotation and scale of a single point: none (identity)
+                rot, s = np.eye(d), 1.0
+                mat = rot
+                t = mu_x - mu_y
+                sigma2 = (xpx - 2.0 * float(np.trace(a)) + ypy) / (np_ * d)
+            else:
+                if target_point:  # A = 0: any rotation fits; the identity, explicitly
+                    rot = np.eye(d)
+                else:
+                    u, _, vt = np.linalg.svd(a)
+                    cdiag = np.ones(d)
+                    cdiag[-1] = np.linalg.det(u @ vt)
+                    rot = (u * cdiag) @ vt
+                tr_ar = float(np.sum(a * rot))
+                s = tr_ar / ypy if (with_scale and ypy > 0) else 1.0
+                mat = s * rot
+                t = mu_x - mat @ mu_y
+                sigma2 = (xpx - s * tr_ar) / (np_ * d)
         else:
             yhat = src_n - mu_y
             ypy = (yhat.T * p1) @ yhat
-            try:
-                mat = np.linalg.solve(ypy.T, a.T).T  # B = A (Y^' dP1 Y^)^-1
-            except np.linalg.LinAlgError:
-                mat = a @ np.linalg.pinv(ypy)
+            mat, solved = _affine_matrix(a, ypy, np_ * src_resolution**2, source_point)
             t = mu_x - mat @ mu_y
-            sigma2 = (xpx - float(np.sum(a * mat))) / (np_ * d)
+            if solved:  # B Y^' dP1 Y^ = A
+                sigma2 = (xpx - float(np.sum(a * mat))) / (np_ * d)
+            else:
+                sigma2 = xpx - 2.0 * float(np.sum(a * mat)) + float(np.sum((mat @ ypy) * mat))
+                sigma2 /= np_ * d
         sigma2 = max(abs(sigma2), floor)
         moved = src_n @ mat.T + t
     _finish(converged, name, max_iter, tol)
@@ -691,6 +759,31 @@ def _linear_cpd(
         _centre=centre,
         _unit=unit,
     )
+
+
+def _affine_matrix(a, ypy, floor, source_point):
+    """The affine M-step's ``B = A (Y^' dP1 Y^)^-1``; ``(B, True)`` when solved as is.
+
+    ``ypy`` (D x D, symmetric positive semi-definite) is singular when the source
+    has no spread in some direction (a single point, a line, a plane): B is then
+    undetermined there. Eigen-directions of ``ypy`` with eigenvalue at most ``floor``
+    (the source's rounding) or ``D eps`` times the largest are dropped and B is the
+    solution closest to the identity, ``I + (A - ypy) V diag(1/e) V'`` over the kept
+    directions: it maps the directions without spread as the identity does (a single
+    source point: ``B = I``, a pure translation). Returns ``(B, False)`` then.
+    """
+    d = ypy.shape[0]
+    if source_point:
+        return np.eye(d), False
+    ev, vec = np.linalg.eigh(ypy)
+    keep = ev > max(floor, ev[-1] * d * np.finfo(np.float64).eps)
+    if keep.all():
+        try:
+            return np.linalg.solve(ypy.T, a.T).T, True
+        except np.linalg.LinAlgError:  # pragma: no cover - ruled out by the eigenvalues
+            pass
+    vk = vec[:, keep]
+    return np.eye(d) + ((a - ypy) @ vk / ev[keep]) @ vk.T, False
 
 
 def register_rigid(
@@ -727,6 +820,15 @@ def register_rigid(
     CPDResult
         ``kind="rigid"``, with ``rotation``, ``scale``, ``matrix`` (s R) and
         ``translation`` in input units.
+
+    Notes
+    -----
+    A single source point (all points coincide up to 1e-9 of their coordinates'
+    magnitude) has no rotation or scale: it gets ``rotation = I`` and ``scale = 1``, a
+    pure translation onto the target's (weighted) centroid. A single target point gives
+    no direction to align with: ``rotation = I``, and the fitted scale is 0 (the source
+    shrinks onto it; with ``scale=False`` it is only translated). Either way the
+    result does not depend on units (see ``normalize`` in :func:`register_nonrigid`).
 
     Examples
     --------
@@ -768,6 +870,13 @@ def register_affine(
     """Affine Coherent Point Drift: ``T(y) = B y + t``.
 
     Parameters are as in :func:`register_rigid` (without ``scale``).
+
+    Where the source has no spread in some direction (a single point, a line, a
+    plane: the M-step's ``Y' dP1 Y`` is singular, to rounding) B is not determined
+    there: B is then the solution closest to the identity, mapping those directions
+    as the identity does (a single source point: ``B = I``, a translation; a planar
+    source: B fitted in the plane, the normal kept). A single target point gives
+    ``B = 0``.
 
     Returns
     -------

@@ -25,24 +25,24 @@ _J = JOINT_INDEX
 # to pelvis centre). Fitted by `python scripts/fit_kinect_convention.py` on the
 # development UTD-MHAD sequences (subjects 1-4, trial 1, 108 sequences) from the
 # default PoseTracker's output. Cross-validated by subject (fit on two, scored on the
-# other two): mAP@10cm 0.63 -> 0.84, MPJPE 93-94 -> 65-67 mm.
+# other two): mAP@10cm 0.62 -> 0.84-0.85, MPJPE 94-96 -> 63-67 mm.
 _KINECT_OFFSETS = np.array(
     [
-        [-0.032, 0.026, -0.056],  # head
-        [-0.027, -0.054, -0.026],  # neck
-        [-0.003, -0.113, -0.021],  # right_shoulder
-        [-0.050, -0.163, -0.026],  # left_shoulder
-        [-0.018, -0.154, 0.006],  # right_elbow
-        [-0.055, -0.214, -0.011],  # left_elbow
-        [-0.012, -0.147, 0.043],  # right_hand
-        [-0.060, -0.210, 0.036],  # left_hand
-        [-0.034, 0.018, -0.008],  # torso
-        [0.059, 0.087, -0.001],  # right_hip
-        [-0.143, 0.104, 0.018],  # left_hip
-        [0.006, -0.020, -0.068],  # right_knee
-        [-0.068, 0.028, -0.047],  # left_knee
-        [0.003, 0.005, 0.004],  # right_foot
-        [-0.046, 0.035, -0.003],  # left_foot
+        [-0.032, 0.025, -0.057],  # head
+        [-0.028, -0.055, -0.025],  # neck
+        [-0.003, -0.109, -0.022],  # right_shoulder
+        [-0.054, -0.175, -0.024],  # left_shoulder
+        [-0.018, -0.152, 0.004],  # right_elbow
+        [-0.056, -0.222, -0.011],  # left_elbow
+        [-0.008, -0.157, 0.035],  # right_hand
+        [-0.059, -0.225, 0.034],  # left_hand
+        [-0.031, 0.017, -0.007],  # torso
+        [0.072, 0.071, 0.002],  # right_hip
+        [-0.138, 0.114, 0.021],  # left_hip
+        [0.008, -0.022, -0.069],  # right_knee
+        [-0.069, 0.056, -0.037],  # left_knee
+        [0.029, 0.008, 0.009],  # right_foot
+        [-0.065, 0.064, 0.008],  # left_foot
     ]
 )
 _KINECT_OFFSETS.setflags(write=False)

@@ -222,7 +222,7 @@ def parse_bvh(text: str, *, source: str = "<string>") -> BvhData:
     Parameters
     ----------
     text : str
-        The whole file's content.
+        The whole file's content (a leading UTF-8 byte-order mark is ignored).
     source : str
         A name for the text (the file path) used in error messages.
 
@@ -245,7 +245,8 @@ def parse_bvh(text: str, *, source: str = "<string>") -> BvhData:
     >>> bvh.n_frames, bvh.fps
     (2, 25.0)
     """
-    lines = text.splitlines()
+    # a UTF-8 byte-order mark (some exporters write one) is not part of the text
+    lines = text.removeprefix("\ufeff").splitlines()
     tokens = _Tokens(lines, source)
     if not tokens.items or tokens.items[0][0] != "HIERARCHY":
         raise tokens.error("a BVH file must start with 'HIERARCHY'.", 1)
@@ -433,7 +434,7 @@ def load_bvh(path: str | os.PathLike) -> BvhData:
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8", errors="replace")
+        text = path.read_text(encoding="utf-8-sig", errors="replace")
     except OSError as exc:
         raise ValueError(f"Cannot read BVH file {str(path)!r}: {exc}") from exc
     return parse_bvh(text, source=str(path))

@@ -85,6 +85,17 @@ def _icp(source: np.ndarray, target: np.ndarray, iterations: int = 10):
     return rot, trans, nn
 
 
+def _units_hint(depth: np.ndarray) -> str:
+    """A hint when a frame's depth looks like millimetres given as metres, else ""."""
+    valid = depth[np.isfinite(depth) & (depth > 0)]
+    if valid.size == 0 or np.median(valid) <= 20.0:  # metres: nobody stands 20 m away
+        return ""
+    return (
+        f"; its median depth is {np.median(valid):g} m: raw sensor units given as metres? "
+        f"Use DepthFrame.from_raw(raw, intrinsics, depth_scale=1000) for millimetres"
+    )
+
+
 class PoseTracker:
     """3-D pose from depth frames by nonrigid CPD body-part tracking.
 
@@ -270,6 +281,11 @@ class PoseTracker:
     # ------------------------------------------------------------------ public API
     def reset(self, intrinsics: Intrinsics) -> None:
         """Forget the track (and the calibration) and prepare for a new sequence."""
+        if not isinstance(intrinsics, Intrinsics):
+            raise ValueError(
+                f"The 'intrinsics' argument of PoseTracker.reset must be an Intrinsics. "
+                f"Got {type(intrinsics).__name__} instead."
+            )
         self.intrinsics = intrinsics
         self._downsample_seed = int(check_rng(self._seed).integers(2**31))
         self._last_joints: np.ndarray | None = None
@@ -342,7 +358,7 @@ class PoseTracker:
             return FrameResult.empty(
                 frame.index,
                 FrameStatus.NO_PERSON,
-                f"{where}: no person found ({n_mask} foreground pixels)",
+                f"{where}: no person found ({n_mask} foreground pixels)" + _units_hint(depth),
                 timestamp=frame.timestamp,
                 timings_ms=timings,
             )
