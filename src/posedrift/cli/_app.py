@@ -14,16 +14,21 @@ import typer
 
 app = typer.Typer(
     name="posedrift",
-    help="3-D human pose from depth frames: nonrigid CPD body-part tracking on a CPU.",
+    help="3-D human pose from depth frames: nonrigid CPD body-part tracking on a CPU.\n\n"
+    "Example: posedrift demo, then posedrift track recording/ --out poses/",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
 )
 eval_app = typer.Typer(
-    help="Evaluate methods against ground truth or a reference skeleton.", no_args_is_help=True
+    help="Evaluate methods against ground truth or a reference skeleton.\n\n"
+    "Example: posedrift eval synthetic builtin --frames 300 --json table1.json",
+    no_args_is_help=True,
 )
 bench_app = typer.Typer(
-    help="Speed and accuracy benchmarks, peers side by side.", no_args_is_help=True
+    help="Speed and accuracy benchmarks, peers side by side.\n\n"
+    "Example: posedrift bench track --frames 300",
+    no_args_is_help=True,
 )
 app.add_typer(eval_app, name="eval")
 app.add_typer(bench_app, name="bench")

@@ -27,8 +27,9 @@ def train(
         Path | None,
         typer.Option(
             "--mocap",
-            help="Folder of BVH clips for poses (default: $POSEDRIFT_DATA/mocap or "
-            "../shared/data/mocap when present; else the procedural motion only).",
+            help="Folder of BVH clips (.bvh in any letter case), or one BVH file, for poses "
+            "(default: $POSEDRIFT_DATA/mocap or ../shared/data/mocap when present; else the "
+            "procedural motion only).",
         ),
     ] = None,
     exclude: Annotated[
