@@ -10,10 +10,10 @@ the method, never in it: it bounds what better labels alone could give, and its
 first / last 100-frame ratio measures how much harder the end of a clip is than its
 beginning (the drift target compares those windows).
 
-Usage (about 30 s per 500-frame clip)::
+Usage (about 10 s per 500-frame clip; ``--height`` and ``--girth`` render another body)::
 
     OMP_NUM_THREADS=1 python benchmarks/label_oracle.py builtin \\
-        ../shared/data/mocap/cmu/002_07.bvh --frames 500
+        ../shared/data/mocap/cmu/002_07.bvh --frames 500 [--height 1.55 --girth 1.15]
 """
 
 from __future__ import annotations
@@ -74,13 +74,24 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("clips", nargs="+", help="BVH files, or 'builtin'")
     parser.add_argument("--frames", type=int, default=500)
+    parser.add_argument("--height", type=float, default=None, help="body stature, metres")
+    parser.add_argument("--girth", type=float, default=1.0, help="body girth factor")
     args = parser.parse_args()
+    shape = {"girth": args.girth} if args.girth != 1.0 else None
     columns = ["mean", "first 100", "last 100", "last/first", *VIEWS]
     print("| clip | labels | " + " | ".join(columns) + " |")
     print("|---|---|" + "---:|" * len(columns))
     for clip in args.clips:
         motion = procedural_motion(fps=30.0) if clip == "builtin" else bvh_motion(clip)
-        sequence = build_sequence(motion, n_frames=args.frames, in_place=True, rng=0, name=clip)
+        sequence = build_sequence(
+            motion,
+            n_frames=args.frames,
+            in_place=True,
+            shape=shape,
+            stature=args.height,
+            rng=0,
+            name=clip,
+        )
         tracker = PoseTracker(sequence.frames[0].intrinsics)
         tracked = joint_angles(np.stack([tracker.process(f).joints for f in sequence.frames]))
         oracle = true_label_angles(sequence, tracker.calibration)

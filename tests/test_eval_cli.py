@@ -11,7 +11,7 @@ import posedrift.evaluation._harness as harness
 from posedrift.camera import DepthFrame, backproject, camera_preset
 from posedrift.cli import app
 from posedrift.evaluation import EvaluationSequence, Reference, evaluate, parse_methods
-from posedrift.skeleton import ANGLE_NAMES, joint_angles, t_pose_joints
+from posedrift.skeleton import ANGLE_NAMES, JOINT_NAMES, joint_angles, t_pose_joints
 from posedrift.tracking import FrameResult, FrameStatus
 
 METHOD_KEYS = {
@@ -173,8 +173,10 @@ def test_eval_synthetic_cli_schema_and_skip(mocap_dir, tmp_path, monkeypatch):
         "methods",
         "noise",
         "in_place",
+        "body",
         "skipped",
     }
+    assert data["body"] == {"height": None, "girth": 1.0}
     assert data["protocol"] == "synthetic" and data["frames"] == 12
     assert data["sequences"] == ["001_01"]
     assert list(data["methods"]) == ["shotton", "pda"]
@@ -557,3 +559,38 @@ def test_eval_synthetic_same_stem_gets_distinct_names(mocap_dir, tmp_path, monke
     assert f"warning: {again} is given more than once (as {first}): evaluated once" in (
         result.stderr
     )
+
+
+def test_eval_synthetic_renders_the_body_asked_for(tmp_path, monkeypatch):
+    import posedrift.synthetic as synthetic
+
+    oracle = OracleForest()
+    build = synthetic.build_sequence
+    built = []
+
+    def spy(*args, **kwargs):
+        seq = build(*args, **kwargs)
+        oracle.add(seq)
+        built.append(seq)
+        return seq
+
+    monkeypatch.setattr(synthetic, "build_sequence", spy)
+    monkeypatch.setattr(harness, "_default_forest", lambda: oracle)
+    out = tmp_path / "b.json"
+    args = ["-q", "eval", "synthetic", "builtin", "--frames", "3", "--methods", "pda"]
+    result = CliRunner().invoke(
+        app, [*args, "--height", "1.55", "--girth", "1.2", "--json", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    assert json.loads(out.read_text())["body"] == {"height": 1.55, "girth": 1.2}
+    # The stature is the posed body's at frame 0 (the T-pose): against a 1.75 m one, the
+    # skeleton's head-to-ankle span scales with it.
+    assert CliRunner().invoke(app, [*args, "--height", "1.75"]).exit_code == 0
+    head = JOINT_NAMES.index("head")
+    feet = [JOINT_NAMES.index("right_foot"), JOINT_NAMES.index("left_foot")]
+    short, tall = (b.reference.joints[0] for b in built)
+    spans = [j[feet, 1].mean() - j[head, 1] for j in (short, tall)]  # camera +Y is down
+    assert abs(spans[0] / spans[1] - 1.55 / 1.75) < 0.005
+    for bad, option in ((["--height", "3"], "--height"), (["--girth", "0"], "--girth")):
+        result = CliRunner().invoke(app, [*args, *bad])
+        assert result.exit_code == 2 and option in result.output

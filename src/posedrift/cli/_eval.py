@@ -96,11 +96,22 @@ def eval_synthetic(
             "--model", help="Body-part forest file shared by all methods (default: shipped)."
         ),
     ] = None,
+    height: Annotated[
+        float | None,
+        typer.Option(
+            "--height",
+            help="Body stature in metres, in (0.5, 2.5) (default: each clip's own skeleton's).",
+        ),
+    ] = None,
+    girth: Annotated[
+        float, typer.Option("--girth", help="Body girth factor, > 0 (1 = the default body).")
+    ] = 1.0,
 ) -> None:
     """Render clips and evaluate every method on the same frames (the paper's Table 1).
 
     Each clip is resampled to 30 fps, starts from a T-pose, and is rendered at
-    320 x 240 with the person 2.8 m away; the methods see only the depth frames.
+    320 x 240 with the person 2.8 m away (the default body, or the --height and
+    --girth asked for); the methods see only the depth frames.
     Prints the table in Markdown; a clip that cannot be read or mapped is named,
     skipped, and makes the exit status 1. A source given twice (the same file) is
     evaluated once; files of the same name in different folders get distinct
@@ -109,7 +120,7 @@ def eval_synthetic(
     Example: posedrift eval synthetic builtin ../shared/data/mocap/cmu/002_05.bvh
     --frames 500 --methods cpd,shotton,pda,icp --json table1.json --figures figs
     """
-    from posedrift.cli._synth import _load_source
+    from posedrift.cli._synth import _check_range, _load_source
     from posedrift.evaluation import evaluate, parse_methods
     from posedrift.synthetic import build_sequence
 
@@ -117,7 +128,10 @@ def eval_synthetic(
         names = parse_methods(methods)
     except ValueError as exc:
         raise fail(str(exc)) from exc
+    _check_range("--height", height, 0.5, 2.5)
+    _check_range("--girth", girth, 0.0, None)
     _check_outputs(json_out, figures)
+    shape = {"girth": girth} if girth != 1.0 else None
     sequences, skipped = [], []
     for i, (source, label) in enumerate(_name_sources(sources)):
         try:
@@ -125,7 +139,14 @@ def eval_synthetic(
             if progress_enabled():
                 typer.echo(f"rendering {label} ({frames} frames)", err=True)
             seq = build_sequence(
-                motion, n_frames=frames, noise=noise, in_place=in_place, rng=seed + i, name=label
+                motion,
+                n_frames=frames,
+                noise=noise,
+                in_place=in_place,
+                shape=shape,
+                stature=height,
+                rng=seed + i,
+                name=label,
             )
         except (ValueError, OSError, KeyError) as exc:
             message = str(exc)
@@ -158,6 +179,7 @@ def eval_synthetic(
         raise fail(str(exc)) from exc
     report["noise"] = bool(noise)
     report["in_place"] = bool(in_place)
+    report["body"] = {"height": height, "girth": girth}
     _finish(report, skipped, json_out, paper)
 
 
