@@ -24,7 +24,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from posedrift.camera import backproject
-from posedrift.evaluation._harness import VIEWS
+from posedrift.evaluation import VIEWS
 from posedrift.labelling._relabel import geodesic_graph
 from posedrift.points import downsample
 from posedrift.skeleton import facing_yaw, joint_angles

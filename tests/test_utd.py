@@ -218,3 +218,14 @@ def test_limit_counts_sequences_in_order_paired_or_not(tmp_path):
     assert [f[0] for f in found] == ["a3_s1_t1"] and skipped == []
     with pytest.raises(ValueError, match="'limit' argument must be at least 1. Got 0"):
         find_utd_sequences(tmp_path, limit=0)
+
+
+def test_floating_point_depth_is_metres(tmp_path):
+    millimetres = np.zeros((240, 320, 2), np.uint16)
+    millimetres[60:200, 140:180] = 2873
+    mm_depth, skel = _write_utd(tmp_path, "a1_s1_t1", frames=2, depth=millimetres)
+    m_depth, _ = _write_utd(tmp_path, "a2_s1_t1", frames=2, depth=millimetres / 1000.0)
+    a = load_utd_sequence(mm_depth, skel).frames[0].depth
+    b = load_utd_sequence(m_depth, skel).frames[0].depth
+    np.testing.assert_allclose(b, a, atol=1e-6)
+    assert abs(float(a.max()) - 2.873) < 1e-6  # metres

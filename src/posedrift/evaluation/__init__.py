@@ -3,6 +3,7 @@
 from posedrift.evaluation._harness import (
     DEFAULT_METHODS,
     METHODS,
+    VIEWS,
     EvaluationRun,
     MethodRun,
     evaluate,
@@ -10,6 +11,7 @@ from posedrift.evaluation._harness import (
     parse_methods,
     run_methods,
     summarize,
+    unusable_reason,
 )
 from posedrift.evaluation._metrics import (
     angle_errors,
@@ -35,6 +37,7 @@ __all__ = [
     "KINECT20_TO_15",
     "METHODS",
     "PAPER_TABLE1",
+    "VIEWS",
     "EvaluationRun",
     "EvaluationSequence",
     "MethodRun",
@@ -54,4 +57,5 @@ __all__ = [
     "parse_methods",
     "run_methods",
     "summarize",
+    "unusable_reason",
 ]

@@ -209,6 +209,9 @@ def load_utd_sequence(
         k = Intrinsics(
             fx=k.fx, fy=k.fy, cx=(k.width - 1) - k.cx, cy=k.cy, width=k.width, height=k.height
         )
+    # UTD-MHAD stores millimetres as integers; floating-point depth is metres, as for
+    # every other posedrift reader.
+    scale = 1000.0 if np.issubdtype(depth.dtype, np.integer) else 1.0
     frames = []
     for t in range(n):
         raw = depth[:, ::-1, t] if unmirror else depth[:, :, t]
@@ -216,7 +219,7 @@ def load_utd_sequence(
             DepthFrame.from_raw(
                 np.ascontiguousarray(raw),
                 k,
-                depth_scale=1000.0,
+                depth_scale=scale,
                 index=t,
                 timestamp=t / 30.0,
                 source=f"{depth_path.name}",
