@@ -60,3 +60,23 @@ def test_bench_track_errors(tmp_path):
         bench_track([], stage_clock="sundial")
     with pytest.raises(ValueError, match="at least one sequence"):
         bench_track([])
+
+
+def test_cli_bench_track_in_a_room_with_another_camera(tmp_path):
+    out = tmp_path / "room.json"
+    result = CliRunner().invoke(
+        app,
+        ["-q", "bench", "track", "--frames", "3", "--repeats", "1", "--room", "--camera",
+         "d435", "--distance", "2.0", "--json", str(out)],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    camera = json.loads(out.read_text())["camera"]
+    assert camera.startswith("640x480 px, fx 385.0, person 2.0 m away") and "room" in camera
+    seq = render_sequences(frames=1, room=True)[0]
+    depth = seq.frames[0].depth
+    assert (depth > 0).mean() > 0.5  # the floor and the wall fill the frame
+
+
+def test_bench_track_rejects_an_unknown_camera():
+    bad = CliRunner().invoke(app, ["-q", "bench", "track", "--camera", "pinhole9"])
+    assert bad.exit_code == 2 and "--camera must be one of" in bad.output

@@ -80,6 +80,30 @@ def test_segment_room_removes_floor_and_wall(rendered):
     assert precision > 0.97
 
 
+def test_segment_reuses_a_floor_that_still_fits_and_refits_one_that_does_not(rendered):
+    _, room = rendered
+    frame = room.frames[0]
+    plain, floor = segment_person(frame, return_floor=True)
+    assert floor is not None and np.array_equal(plain, segment_person(frame))
+    normal, offset = floor
+    assert normal @ np.array([0.0, -1.0, 0.0]) > 0.95  # level camera: the floor's up is -Y
+    # The same plane handed back is kept as it is, and gives the same person.
+    again, kept = segment_person(frame, floor=floor, return_floor=True)
+    assert kept is floor and np.array_equal(again, plain)
+    # A plane 40 cm too high holds no floor points: RANSAC finds the real floor.
+    wrong = (normal, offset - 0.4)
+    refit, found = segment_person(frame, floor=wrong, return_floor=True)
+    assert found is not wrong and np.array_equal(refit, plain)
+    # Nothing but floor: no person, and no error.
+    points, pixels = backproject(frame.depth, frame.intrinsics, frame.depth > 0)
+    on_floor = pixels[np.abs(points @ normal + offset) < 0.02]
+    floor_only = np.zeros_like(frame.depth)
+    floor_only[on_floor[:, 0], on_floor[:, 1]] = frame.depth[on_floor[:, 0], on_floor[:, 1]]
+    assert len(on_floor) > 1000
+    empty, _ = segment_person(DepthFrame(floor_only, frame.intrinsics), return_floor=True)
+    assert not empty.any()
+
+
 def test_segment_splat_scene_with_floor_and_wall():
     person, cam = _person_depth()
     scene = _scene(person, cam)

@@ -145,6 +145,33 @@ def test_person_leaving_and_reentering(sequence):
     assert all(s is FrameStatus.TRACKED for s in statuses[6:])
 
 
+def test_person_found_beyond_the_depth_band_of_the_last_frame(sequence):
+    tracker = PoseTracker(K)
+    _run(tracker, sequence.frames[:3])
+    depth = sequence.frames[3].depth.copy()
+    depth[depth > 0] -= 1.5  # 1.5 m nearer in one frame: in front of the searched band
+    r = tracker.process(DepthFrame(depth, K, index=3))
+    assert r.status is not FrameStatus.NO_PERSON and r.has_pose
+    assert np.median(r.points[:, 2]) == pytest.approx(np.median(depth[depth > 0]), abs=0.1)
+
+
+def test_tracking_in_a_room_keeps_floor_and_wall_out():
+    from scipy.spatial import cKDTree
+
+    from posedrift.camera import backproject
+    from posedrift.synthetic import build_sequence, procedural_motion
+
+    room = build_sequence(procedural_motion(), n_frames=6, background=True, rng=0)
+    tracker = PoseTracker(K)
+    for frame, truth in zip(room.frames, room.reference.labels, strict=True):
+        r = tracker.process(frame)
+        assert r.has_pose
+        person, _ = backproject(frame.depth, K, truth > 0)
+        gap, _ = cKDTree(person).query(r.points)
+        assert np.percentile(gap, 99) < 0.02  # metres: every point is on the person
+    assert tracker._floor is not None  # the floor found once is carried to the next frame
+
+
 def test_lost_track_is_reinitialized(sequence):
     forest = LabelImages(sequence)
     tracker = PoseTracker(K, forest=forest)

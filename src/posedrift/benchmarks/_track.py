@@ -87,6 +87,8 @@ class TrackBenchmark:
         Frames per status in the last repeat.
     n_points : int
     sequences : tuple of str
+    camera : str
+        Image size and focal length of the sequences' camera, and the person's distance.
     stage_clock : str
         ``"cpu"`` or ``"wall"``: the clock of the stage timings.
     threads : str
@@ -103,6 +105,7 @@ class TrackBenchmark:
     status_counts: dict[str, int] = field(default_factory=dict)
     n_points: int = 400
     sequences: tuple[str, ...] = ()
+    camera: str = ""
     stage_clock: str = "cpu"
     threads: str = ""
     machine: str = ""
@@ -135,7 +138,8 @@ class TrackBenchmark:
         """The per-stage table and the frame rates, as Markdown."""
         lines = [
             f"posedrift bench track: {self.frames} frames x {len(self.repeats_cpu_ms)} repeats, "
-            f"{self.n_points} points, {', '.join(self.sequences)}; stage clock {self.stage_clock}; "
+            f"{self.n_points} points, {', '.join(self.sequences)}; {self.camera}; "
+            f"stage clock {self.stage_clock}; "
             f"{self.threads}",
             "",
             "| stage | tracked median ms | reinit median ms | mean ms/frame |",
@@ -219,6 +223,9 @@ def render_sequences(
     bvh: Sequence[str | os.PathLike] = (),
     *,
     frames: int = 150,
+    intrinsics=None,
+    distance: float | None = None,
+    room: bool = False,
     on_frame: Callable[[int, int], None] | None = None,
 ):
     """The benchmark's sequences: the built-in procedural motion, or BVH clips.
@@ -229,6 +236,13 @@ def render_sequences(
         BVH clips; empty for the built-in motion.
     frames : int
         Frames rendered per sequence (fewer where a clip is shorter).
+    intrinsics : Intrinsics, optional
+        The camera (default: Kinect v1 at 320 x 240, as in the evaluation protocol).
+    distance : float, optional
+        The person's distance from the camera in metres (default: the protocol's).
+    room : bool
+        Render the floor and a wall behind the person, with Kinect-like depth noise,
+        as a real camera sees a person (default: the person alone, noise-free).
     on_frame : callable, optional
         ``on_frame(done, total)`` progress callback of the renderer.
 
@@ -239,6 +253,11 @@ def render_sequences(
     from posedrift.synthetic import build_sequence, bvh_motion, procedural_motion
 
     frames = check_scalar(frames, "frames", low=1, include_low=True, integer=True)
+    placement = {"background": True, "noise": True} if room else {}
+    if intrinsics is not None:
+        placement["intrinsics"] = intrinsics
+    if distance is not None:
+        placement["distance"] = check_scalar(distance, "distance", low=0.0)
     out = []
     if not bvh:
         motions = [("builtin", procedural_motion(fps=30.0))]
@@ -258,6 +277,7 @@ def render_sequences(
                 rng=0,
                 name=name,
                 on_frame=on_frame,
+                **placement,
             )
         )
     return out
@@ -271,6 +291,7 @@ def bench_track(
     repeats: int = 3,
     stage_clock: str = "cpu",
     tracker_options: dict | None = None,
+    scene: str = "",
 ) -> TrackBenchmark:
     """Time :class:`posedrift.tracking.PoseTracker` per stage on one thread.
 
@@ -290,6 +311,9 @@ def bench_track(
         The clock of the per-stage timings.
     tracker_options : dict, optional
         Extra keyword arguments of ``PoseTracker``.
+    scene : str
+        What else the frames show (``"room"`` for :func:`render_sequences`'s ``room``),
+        recorded with the camera.
 
     Returns
     -------
@@ -372,11 +396,22 @@ def bench_track(
         status_counts=counts,
         n_points=n_points,
         sequences=tuple(str(s.name) for s in sequences),
+        camera=_camera_text(sequences[0]) + (f", {scene}" if scene else ""),
         stage_clock=clock,
         threads=threads,
         machine=f"{platform.processor() or platform.machine()}, Python "
         f"{platform.python_version()}, NumPy {np.__version__}",
     )
+
+
+def _camera_text(sequence) -> str:
+    """``"320x240 px, fx 285.6, person 2.8 m away"`` for a rendered sequence."""
+    k = sequence.frames[0].intrinsics
+    text = f"{k.width}x{k.height} px, fx {k.fx:.1f}"
+    pelvis = getattr(sequence.reference, "joints", None)
+    if pelvis is not None and len(pelvis):
+        text += f", person {float(np.nanmedian(pelvis[:, :, 2])):.1f} m away"
+    return text
 
 
 def _median(values: list[float] | None) -> float:

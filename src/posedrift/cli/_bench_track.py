@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from posedrift.cli._app import bench_app, fail, progress_enabled
+from posedrift.cli._options import CameraOption
 
 
 @bench_app.command("track")
@@ -25,6 +26,18 @@ def bench_track_command(
     repeats: Annotated[
         int, typer.Option("--repeats", min=1, help="Runs over the sequences (medians).")
     ] = 3,
+    camera: CameraOption = None,
+    distance: Annotated[
+        float | None,
+        typer.Option("--distance", min=0.3, help="The person's distance, metres (default 2.8)."),
+    ] = None,
+    room: Annotated[
+        bool,
+        typer.Option(
+            "--room/--person-only",
+            help="Render the floor and a wall behind the person, with Kinect-like noise.",
+        ),
+    ] = False,
     stage_clock: Annotated[
         str, typer.Option("--stage-clock", help="Clock of the stage timings: cpu or wall.")
     ] = "cpu",
@@ -34,12 +47,14 @@ def bench_track_command(
 ) -> None:
     """Time the tracker per stage on a rendered synthetic sequence, on one thread.
 
-    Renders the sequence first (not timed), then runs PoseTracker over it --repeats
-    times. Prints a Markdown table of the median milliseconds of each stage for
+    Renders the sequence first (not timed; with --camera, as that camera sees it),
+    then runs PoseTracker over it --repeats times. Prints a Markdown table of the median milliseconds of each stage for
     tracked and re-initialized frames, the CPU milliseconds per frame and the frames
     per second (CPU time), overall and per kind of frame.
 
     Example: OMP_NUM_THREADS=1 posedrift bench track --frames 300 --repeats 3 --json track.json
+
+    Example: posedrift bench track --room --camera d435 --distance 2.0
     """
     import json
 
@@ -50,6 +65,13 @@ def bench_track_command(
 
     if stage_clock not in ("cpu", "wall"):
         raise fail(f"--stage-clock must be 'cpu' or 'wall'. Got {stage_clock!r}.")
+    placement = {"distance": distance, "room": room}
+    if camera is not None:
+        from posedrift.camera import CAMERA_PRESETS
+
+        if camera not in CAMERA_PRESETS:
+            raise fail(f"--camera must be one of {', '.join(CAMERA_PRESETS)}. Got {camera!r}.")
+        placement["intrinsics"] = CAMERA_PRESETS[camera]
     try:
         if progress_enabled():
             from rich.progress import Progress
@@ -60,10 +82,18 @@ def bench_track_command(
                 def on_frame(done: int, total: int) -> None:
                     progress.update(task, completed=done, total=total)
 
-                sequences = render_sequences(bvh or (), frames=frames, on_frame=on_frame)
+                sequences = render_sequences(
+                    bvh or (), frames=frames, on_frame=on_frame, **placement
+                )
         else:
-            sequences = render_sequences(bvh or (), frames=frames)
-        result = bench_track(sequences, n_points=points, repeats=repeats, stage_clock=stage_clock)
+            sequences = render_sequences(bvh or (), frames=frames, **placement)
+        result = bench_track(
+            sequences,
+            n_points=points,
+            repeats=repeats,
+            stage_clock=stage_clock,
+            scene="room (floor, wall, depth noise)" if room else "",
+        )
     except ValueError as exc:
         raise fail(str(exc)) from exc
     text = result.markdown()

@@ -133,11 +133,14 @@ def _floor_plane(
     min_inliers: int,
     min_extent: float,
     rng,
+    known: tuple[np.ndarray, float] | None = None,
 ) -> tuple[np.ndarray, float] | None:
     """:func:`fit_floor_plane` on ``count`` points read through ``take``.
 
     ``take(index)`` returns the points at ``index`` (all of them for ``None``), so a
     caller can compute only the RANSAC sample and, where a plane is found, the rest.
+    A ``known`` plane (the last frame's) is returned as it is where it still holds
+    ``min_inliers`` points and lies below the others; else RANSAC runs.
     """
     if count < max(3, min_inliers):
         return None
@@ -147,6 +150,11 @@ def _floor_plane(
     cos_tilt = np.cos(np.radians(max_tilt_deg))
     sample = take(None) if count <= 3000 else take(gen.choice(count, 3000, replace=False))
     scale = count / len(sample)
+    if known is not None:
+        normal, offset = known
+        on_plane = np.count_nonzero(np.abs(sample @ normal + offset) < threshold)
+        if on_plane * scale >= min_inliers and _below_the_rest(take, normal, offset, threshold):
+            return known
     # Hypotheses from the lowest quarter of the points (where a floor must be).
     low = np.argpartition(sample @ up, max(3, len(sample) // 4) - 1)[: max(3, len(sample) // 4)]
     lowest = sample[low]
@@ -185,10 +193,15 @@ def _floor_plane(
     if np.ptp(inl - (inl @ normal)[:, None] * normal, axis=0).max() < min_extent:
         return None
     # ... and lies below (almost) everything else: most points are on its upper side.
-    signed = take(None) @ normal - normal @ centre
-    if np.mean(signed < -2 * threshold) > 0.05:
+    offset = float(-normal @ centre)
+    if not _below_the_rest(take, normal, offset, threshold):
         return None
-    return normal, float(-normal @ centre)
+    return normal, offset
+
+
+def _below_the_rest(take, normal: np.ndarray, offset: float, threshold: float) -> bool:
+    """Whether at most 5% of the points lie more than ``2 threshold`` under a plane."""
+    return bool(np.mean(take(None) @ normal + offset < -2 * threshold) <= 0.05)
 
 
 def _backproject_pixels(depth: np.ndarray, intrinsics: Intrinsics, rows, cols) -> np.ndarray:
@@ -273,7 +286,9 @@ def segment_person(
     max_join_depth: float = 0.6,
     max_extent: float = 2.6,
     rng: int | np.random.Generator | None = 0,
-) -> np.ndarray:
+    floor: tuple[np.ndarray, float] | None = None,
+    return_floor: bool = False,
+) -> np.ndarray | tuple[np.ndarray, tuple[np.ndarray, float] | None]:
     """The person's pixels in a depth frame.
 
     Steps: depth gating to ``[min_depth, max_depth]``; the background model's
@@ -308,11 +323,19 @@ def segment_person(
         this many metres of the person's are joined to it (limbs in front of the body).
     rng : int, Generator or None
         Seeds the floor RANSAC.
+    floor : (normal (3,), offset), optional
+        A floor plane to try first, such as the last frame's from a static camera:
+        kept where it still holds enough of this frame's points and lies below the
+        rest, else RANSAC looks for the floor afresh.
+    return_floor : bool
+        Also return the floor plane used (``None`` where none was found).
 
     Returns
     -------
     mask : (H, W) bool
         All False where no person is found.
+    floor : (normal (3,), offset) or None
+        Only with ``return_floor``.
 
     Examples
     --------
@@ -341,8 +364,13 @@ def segment_person(
     mask = (depth >= min_depth) & (depth <= max_depth)
     if background is not None:
         mask &= background.foreground(depth)
+    plane = None
+
+    def done(person: np.ndarray):
+        return (person, plane) if return_floor else person
+
     if not mask.any():
-        return mask
+        return done(mask)
     if remove_floor and intrinsics is not None and np.count_nonzero(mask) >= min_pixels:
         # The floor's RANSAC sample is back-projected alone; every pixel only where a
         # plane is found (Eq. 1 per pixel: the same points as backproject(depth, mask)).
@@ -357,12 +385,14 @@ def segment_person(
             return every[0]
 
         options = dict(fit_floor_plane.__kwdefaults__, threshold=floor_threshold, rng=rng)
-        plane = _floor_plane(len(rows), take, **options)
+        plane = _floor_plane(len(rows), take, known=floor, **options)
         if plane is not None:
             normal, offset = plane
             height = take(None) @ normal + offset
             on_floor = height < floor_threshold
             mask[rows[on_floor], cols[on_floor]] = False
+            if not mask.any():
+                return done(mask)
     # Work on the bounding box of the gated pixels (the person is a small part of a frame).
     rows = np.nonzero(mask.any(axis=1))[0]
     cols = np.nonzero(mask.any(axis=0))[0]
@@ -379,7 +409,7 @@ def segment_person(
         max_extent=max_extent,
         max_join_depth=max_join_depth,
     )
-    return out
+    return done(out)
 
 
 def _largest_person(
