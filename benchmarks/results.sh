@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Reproduce the tables of docs/RESULTS.md (about 15 minutes on 2 cores).
+# Reproduce the tables of docs/RESULTS.md (about 12 minutes on 2 cores).
 # Usage: bash benchmarks/results.sh [OUT_DIR]   (needs ../shared/data or $POSEDRIFT_DATA)
 set -euo pipefail
 here="$(cd "$(dirname "$0")/.." && pwd)"
@@ -34,5 +34,13 @@ echo "500 frames, $methods,cpd-paper: $(( $(date +%s) - start )) s wall" | tee "
 seqs=$(for a in $(seq 1 27); do printf "a%d_s%d_t1," "$a" $(( a % 4 + 1 )); done)
 posedrift -q eval utd "$data/utd-mhad" --sequences "${seqs%,}" --methods "$methods" \
     --json "$out/utd.json" | tee "$out/utd.md"
-# Speed of the tracker, per stage, one core.
+# The second trial of every action and subject: recordings the Kinect offsets were not fitted on.
+seqs2=$(for a in $(seq 1 27); do for s in 1 2 3 4; do printf "a%d_s%d_t2," "$a" "$s"; done; done)
+posedrift -q eval utd "$data/utd-mhad" --sequences "${seqs2%,}" --methods "$methods" \
+    --json "$out/utd_trial2.json" | tee "$out/utd_trial2.md"
+# Speed of the tracker, per stage, one core: the person alone, in a room, and at 640 x 480.
 posedrift -q bench track --frames 300 --repeats 3 --json "$out/bench_track.json" | tee "$out/bench_track.md"
+posedrift -q bench track --frames 300 --repeats 3 --room --json "$out/bench_track_room.json" \
+    | tee "$out/bench_track_room.md"
+posedrift -q bench track --frames 300 --repeats 3 --room --camera d435 --distance 2.0 \
+    --json "$out/bench_track_vga.json" | tee "$out/bench_track_vga.md"
