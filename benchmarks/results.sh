@@ -20,6 +20,9 @@ posedrift -q eval synthetic "$M/cmu-original-skeleton/131_03.bvh" "$M/cmu/007_03
 # With Kinect-like depth noise.
 posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 --noise --methods "$methods" \
     --json "$out/table1_noise.json" | tee "$out/table1_noise.md"
+# The same in a room: a floor and a wall that every method must segment away.
+posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 --noise --room \
+    --methods "$methods" --json "$out/table1_room.json" | tee "$out/table1_room.md"
 # Ablations of the tracker.
 posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 \
     --methods cpd,cpd-paper,icp-paper,cpd-norelabel,cpd-rigid,cpd-cold,cpd-200,cpd-800 \

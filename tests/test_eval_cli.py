@@ -172,6 +172,7 @@ def test_eval_synthetic_cli_schema_and_skip(mocap_dir, tmp_path, monkeypatch):
         "sequences",
         "methods",
         "noise",
+        "room",
         "in_place",
         "body",
         "skipped",
@@ -594,3 +595,26 @@ def test_eval_synthetic_renders_the_body_asked_for(tmp_path, monkeypatch):
     for bad, option in ((["--height", "3"], "--height"), (["--girth", "0"], "--girth")):
         result = CliRunner().invoke(app, [*args, *bad])
         assert result.exit_code == 2 and option in result.output
+
+
+def test_eval_synthetic_in_a_room(tmp_path, monkeypatch):
+    import posedrift.synthetic as synthetic
+
+    build = synthetic.build_sequence
+    built = []
+
+    def spy(*args, **kwargs):
+        built.append(build(*args, **kwargs))
+        return built[-1]
+
+    monkeypatch.setattr(synthetic, "build_sequence", spy)
+    out = tmp_path / "room.json"
+    args = ["-q", "eval", "synthetic", "builtin", "--frames", "4", "--methods", "cpd,shotton"]
+    result = CliRunner().invoke(app, [*args, "--room", "--json", str(out)])
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert data["room"] is True and data["noise"] is False
+    frame, truth = built[0].frames[1], built[0].reference.labels[1]
+    assert (frame.depth[truth == 0] > 0).mean() > 0.5  # floor and wall fill the background
+    for row in data["methods"].values():  # both methods found the person in the room
+        assert row["failed_frames"] == 0 and row["mpjpe_mm"] < 100

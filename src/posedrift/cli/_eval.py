@@ -70,6 +70,14 @@ def eval_synthetic(
     noise: Annotated[
         bool, typer.Option("--noise/--no-noise", help="Kinect-like depth noise.")
     ] = False,
+    room: Annotated[
+        bool,
+        typer.Option(
+            "--room/--no-room",
+            help="Render the floor and a wall behind the person, which each method must "
+            "segment away (with --noise: as a real camera sees a room).",
+        ),
+    ] = False,
     in_place: Annotated[
         bool,
         typer.Option(
@@ -142,6 +150,7 @@ def eval_synthetic(
                 motion,
                 n_frames=frames,
                 noise=noise,
+                background=room,
                 in_place=in_place,
                 shape=shape,
                 stature=height,
@@ -178,6 +187,7 @@ def eval_synthetic(
             _finish_empty(skipped, json_out, "synthetic")
         raise fail(str(exc)) from exc
     report["noise"] = bool(noise)
+    report["room"] = bool(room)
     report["in_place"] = bool(in_place)
     report["body"] = {"height": height, "girth": girth}
     _finish(report, skipped, json_out, paper)
