@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Reproduce the tables of docs/RESULTS.md (about 12 minutes on 2 cores).
+# Reproduce the tables of docs/RESULTS.md (about 20 minutes on 2 cores).
 # Usage: bash benchmarks/results.sh [OUT_DIR]   (needs ../shared/data or $POSEDRIFT_DATA)
 set -euo pipefail
 here="$(cd "$(dirname "$0")/.." && pwd)"
@@ -23,6 +23,13 @@ posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 --noise --m
 # The same in a room: a floor and a wall that every method must segment away.
 posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 --noise --room \
     --methods "$methods" --json "$out/table1_room.json" | tee "$out/table1_room.md"
+# A 640 x 480 camera: the tracker on every other pixel (the default) and on every pixel.
+for d in 2.0 3.5; do
+    posedrift -q eval synthetic builtin "$M/cmu/007_03.bvh" "$M/cmu/002_07.bvh" \
+        "$M/cmu-original-skeleton/131_03.bvh" --frames 300 --noise --room --camera d435 \
+        --distance "$d" --methods cpd,cpd-fullres --no-paper --json "$out/vga_$d.json" \
+        | tee "$out/vga_$d.md"
+done
 # Ablations of the tracker.
 posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 \
     --methods cpd,cpd-paper,icp-paper,cpd-norelabel,cpd-rigid,cpd-cold,cpd-200,cpd-800 \

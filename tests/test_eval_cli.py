@@ -173,6 +173,8 @@ def test_eval_synthetic_cli_schema_and_skip(mocap_dir, tmp_path, monkeypatch):
         "methods",
         "noise",
         "room",
+        "camera",
+        "distance",
         "in_place",
         "body",
         "skipped",
@@ -597,7 +599,7 @@ def test_eval_synthetic_renders_the_body_asked_for(tmp_path, monkeypatch):
         assert result.exit_code == 2 and option in result.output
 
 
-def test_eval_synthetic_in_a_room(tmp_path, monkeypatch):
+def test_eval_synthetic_in_a_room_with_another_camera(tmp_path, monkeypatch):
     import posedrift.synthetic as synthetic
 
     build = synthetic.build_sequence
@@ -610,11 +612,22 @@ def test_eval_synthetic_in_a_room(tmp_path, monkeypatch):
     monkeypatch.setattr(synthetic, "build_sequence", spy)
     out = tmp_path / "room.json"
     args = ["-q", "eval", "synthetic", "builtin", "--frames", "4", "--methods", "cpd,shotton"]
-    result = CliRunner().invoke(app, [*args, "--room", "--json", str(out)])
+    camera = ["--camera", "d435", "--distance", "2.0"]
+    result = CliRunner().invoke(app, [*args, "--room", *camera, "--json", str(out)])
     assert result.exit_code == 0, result.output
     data = json.loads(out.read_text())
     assert data["room"] is True and data["noise"] is False
+    assert data["camera"] == "d435" and data["distance"] == 2.0
     frame, truth = built[0].frames[1], built[0].reference.labels[1]
+    assert frame.depth.shape == (480, 640)
+    pelvis_depth = built[0].reference.joints[0, JOINT_NAMES.index("torso"), 2]
+    assert abs(pelvis_depth - 2.0) < 0.15
     assert (frame.depth[truth == 0] > 0).mean() > 0.5  # floor and wall fill the background
     for row in data["methods"].values():  # both methods found the person in the room
         assert row["failed_frames"] == 0 and row["mpjpe_mm"] < 100
+    for bad, option in (
+        (["--camera", "pinhole9"], "--camera"),
+        (["--distance", "0"], "--distance"),
+    ):
+        result = CliRunner().invoke(app, [*args, *bad])
+        assert result.exit_code == 2 and option in result.output

@@ -172,6 +172,36 @@ def test_tracking_in_a_room_keeps_floor_and_wall_out():
     assert tracker._floor is not None  # the floor found once is carried to the next frame
 
 
+def test_a_640x480_camera_is_tracked_at_half_resolution():
+    from dataclasses import replace
+
+    from posedrift.camera import camera_preset
+    from posedrift.points import BackgroundModel
+    from posedrift.synthetic import build_sequence, procedural_motion
+    from posedrift.tracking import working_decimation
+
+    vga = camera_preset("kinect1-vga")
+    assert working_decimation(vga) == 2 and working_decimation(K) == 1
+    seq = build_sequence(procedural_motion(), n_frames=4, intrinsics=vga, rng=0)
+    # Identity: the tracker on the VGA frames equals it on their every other pixel (the
+    # QVGA camera: the same focal length over two), with no further decimation.
+    halves = [replace(f, depth=f.depth[::2, ::2].copy(), intrinsics=K) for f in seq.frames]
+    auto = _run(PoseTracker(vga), seq.frames)
+    manual = _run(PoseTracker(K, decimation=1), halves)
+    for a, m in zip(auto, manual, strict=True):
+        assert a.status is m.status
+        np.testing.assert_array_equal(a.joints, m.joints)
+    full = _run(PoseTracker(vga, decimation=1), seq.frames[:2])
+    assert all(r.has_pose for r in full)
+    # A background model learnt at full resolution is subsampled with the frames.
+    wall = np.full(vga.shape, 4.0, np.float32)
+    model = BackgroundModel().fit([wall, wall])
+    room = [replace(f, depth=np.where(f.depth > 0, f.depth, wall)) for f in seq.frames]
+    assert all(r.has_pose for r in _run(PoseTracker(vga, background=model), room))
+    with pytest.raises(ValueError, match="decimation"):
+        PoseTracker(vga, decimation=0)
+
+
 def test_lost_track_is_reinitialized(sequence):
     forest = LabelImages(sequence)
     tracker = PoseTracker(K, forest=forest)

@@ -48,9 +48,10 @@ def bench_track_command(
     """Time the tracker per stage on a rendered synthetic sequence, on one thread.
 
     Renders the sequence first (not timed; with --camera, as that camera sees it),
-    then runs PoseTracker over it --repeats times. Prints a Markdown table of the median milliseconds of each stage for
-    tracked and re-initialized frames, the CPU milliseconds per frame and the frames
-    per second (CPU time), overall and per kind of frame.
+    then runs PoseTracker over it --repeats times. Prints a Markdown table of the
+    median milliseconds of each stage for tracked and re-initialized frames, the CPU
+    milliseconds per frame and the frames per second (CPU time), overall and per
+    kind of frame.
 
     Example: OMP_NUM_THREADS=1 posedrift bench track --frames 300 --repeats 3 --json track.json
 

@@ -12,7 +12,7 @@ from posedrift.cli._app import eval_app, fail, progress_enabled
 _METHODS_HELP = (
     "Comma-separated methods: cpd, shotton, pda, icp, and the ablations cpd-paper, "
     "icp-paper (the paper's pure tracking, no per-frame forest evidence), cpd-norelabel, "
-    "cpd-rigid, cpd-cold, cpd-200, cpd-400, cpd-800."
+    "cpd-rigid, cpd-cold, cpd-200, cpd-400, cpd-800, cpd-fullres."
 )
 
 
@@ -78,6 +78,16 @@ def eval_synthetic(
             "segment away (with --noise: as a real camera sees a room).",
         ),
     ] = False,
+    camera: Annotated[
+        str | None,
+        typer.Option(
+            "--camera", help="Camera preset the clips are rendered for (default kinect1-qvga)."
+        ),
+    ] = None,
+    distance: Annotated[
+        float | None,
+        typer.Option("--distance", help="Camera to person at frame 0, metres (default 2.8)."),
+    ] = None,
     in_place: Annotated[
         bool,
         typer.Option(
@@ -119,7 +129,8 @@ def eval_synthetic(
 
     Each clip is resampled to 30 fps, starts from a T-pose, and is rendered at
     320 x 240 with the person 2.8 m away (the default body, or the --height and
-    --girth asked for); the methods see only the depth frames.
+    --girth asked for; another camera with --camera and --distance); the methods
+    see only the depth frames.
     Prints the table in Markdown; a clip that cannot be read or mapped is named,
     skipped, and makes the exit status 1. A source given twice (the same file) is
     evaluated once; files of the same name in different folders get distinct
@@ -138,7 +149,15 @@ def eval_synthetic(
         raise fail(str(exc)) from exc
     _check_range("--height", height, 0.5, 2.5)
     _check_range("--girth", girth, 0.0, None)
+    _check_range("--distance", distance, 0.3, None)
     _check_outputs(json_out, figures)
+    placement = {} if distance is None else {"distance": distance}
+    if camera is not None:
+        from posedrift.camera import CAMERA_PRESETS
+
+        if camera not in CAMERA_PRESETS:
+            raise fail(f"--camera must be one of {', '.join(CAMERA_PRESETS)}. Got {camera!r}.")
+        placement["intrinsics"] = CAMERA_PRESETS[camera]
     shape = {"girth": girth} if girth != 1.0 else None
     sequences, skipped = [], []
     for i, (source, label) in enumerate(_name_sources(sources)):
@@ -152,6 +171,7 @@ def eval_synthetic(
                 noise=noise,
                 background=room,
                 in_place=in_place,
+                **placement,
                 shape=shape,
                 stature=height,
                 rng=seed + i,
@@ -188,6 +208,8 @@ def eval_synthetic(
         raise fail(str(exc)) from exc
     report["noise"] = bool(noise)
     report["room"] = bool(room)
+    report["camera"] = camera or "kinect1-qvga"
+    report["distance"] = distance
     report["in_place"] = bool(in_place)
     report["body"] = {"height": height, "girth": girth}
     _finish(report, skipped, json_out, paper)

@@ -79,6 +79,10 @@ METHODS: dict[str, tuple[str, MethodFactory]] = {
     "cpd-200": ("ablation: 200 points", _tracker(n_points=200)),
     "cpd-400": ("ablation: 400 points (the default)", _tracker(n_points=400)),
     "cpd-800": ("ablation: 800 points", _tracker(n_points=800)),
+    "cpd-fullres": (
+        "ablation: every pixel of a 640 x 480 camera (no decimation)",
+        _tracker(decimation=1),
+    ),
 }
 """Method name -> (description, factory ``f(intrinsics, *, forest) -> PoseMethod``)."""
 

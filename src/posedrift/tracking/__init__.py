@@ -6,6 +6,6 @@ __all__ = ["FrameResult", "FrameStatus", "PoseMethod"]
 
 from posedrift.tracking._health import Health, assess
 from posedrift.tracking._init import Calibration, calibrate
-from posedrift.tracking._tracker import PoseTracker
+from posedrift.tracking._tracker import PoseTracker, working_decimation
 
-__all__ += ["Calibration", "Health", "PoseTracker", "assess", "calibrate"]
+__all__ += ["Calibration", "Health", "PoseTracker", "assess", "calibrate", "working_decimation"]

@@ -13,6 +13,7 @@ when it is lost.
 
 from __future__ import annotations
 
+import copy
 import time
 import warnings
 from dataclasses import dataclass, replace
@@ -44,6 +45,7 @@ _TRACK_FLOOR = 0.02  # floor of the tracked posterior in the fusion with appeara
 # for the person first: limbs reach about a metre towards the camera, and walls and
 # clutter outside the band never reach the floor fit and the component search.
 _GATE_FRONT, _GATE_BEHIND = 1.2, 1.0
+_MIN_WORKING_FOCAL = 190.0  # pixels; see working_decimation
 _RING_OFFSETS = sorted(
     ((dr, dc) for dr in range(-3, 4) for dc in range(-3, 4) if (dr, dc) != (0, 0)),
     key=lambda o: o[0] ** 2 + o[1] ** 2,
@@ -100,6 +102,25 @@ def _units_hint(depth: np.ndarray) -> str:
     )
 
 
+def working_decimation(intrinsics: Intrinsics) -> int:
+    """How many pixels the tracker steps over in each direction for a camera.
+
+    The largest factor that keeps the working image at least about 320 pixels wide
+    and its focal length at least 190 pixels (two thirds of the Kinect v1's at
+    320 x 240, the resolution the body-part forest was trained at): 2 for 640 x 480
+    cameras (Kinect v1 VGA, RealSense D435), 1 for 320 x 240 and 512 x 424.
+
+    Examples
+    --------
+    >>> from posedrift.camera import camera_preset
+    >>> [working_decimation(camera_preset(n)) for n in ("kinect1-qvga", "kinect1-vga", "d435")]
+    [1, 2, 2]
+    """
+    by_focal = int(min(intrinsics.fx, intrinsics.fy) // _MIN_WORKING_FOCAL)
+    by_width = round(intrinsics.width / 320)
+    return max(1, min(by_focal, by_width))
+
+
 class PoseTracker:
     """3-D pose from depth frames by nonrigid CPD body-part tracking.
 
@@ -148,6 +169,12 @@ class PoseTracker:
         A static camera's background model for segmentation.
     segment_options : dict, optional
         Extra keyword arguments of :func:`posedrift.points.segment_person`.
+    decimation : int, optional
+        Work on every ``decimation``-th pixel of every ``decimation``-th row (the
+        intrinsics scaled to match): the points are downsampled to ``n_points``
+        anyway, and fewer pixels make segmentation cheaper. Default: automatic
+        (:func:`working_decimation`: 2 for 640 x 480 cameras, 1 at 320 x 240); 1
+        works at full resolution.
     appearance_weight : float
         Exponent ``w`` of the body-part forest's per-point probabilities fused into
         the tracked label evidence every frame (a product of experts, beyond the
@@ -203,6 +230,7 @@ class PoseTracker:
         height: float | None = None,
         background: BackgroundModel | None = None,
         segment_options: dict | None = None,
+        decimation: int | None = None,
         min_points: int = 60,
         appearance_weight: float = 3.0,
         appearance_floor: float = 0.01,
@@ -278,6 +306,12 @@ class PoseTracker:
         self.forest = forest
         self.background = background
         self.segment_options = dict(segment_options or {})
+        if decimation is not None:
+            decimation = check_scalar(
+                decimation, "decimation", low=1, include_low=True, integer=True, caller=caller
+            )
+        self.decimation = decimation
+        self._working_backgrounds: dict[int, BackgroundModel] = {}
         self._seed = rng
         self._raise_errors = False  # development switch: let exceptions escape process()
         self.reset(intrinsics)
@@ -345,6 +379,7 @@ class PoseTracker:
     def _process(self, frame: DepthFrame, where: str) -> FrameResult:
         timings: dict[str, float] = {}
         t0 = time.perf_counter()
+        frame = self._working_frame(frame)
         intr = frame.intrinsics
         depth = frame.depth
         if not np.any(depth > 0):
@@ -440,6 +475,37 @@ class PoseTracker:
             message=message,
         )
 
+    def _working_frame(self, frame: DepthFrame) -> DepthFrame:
+        """The frame subsampled by the decimation factor (as it is where that is 1)."""
+        step = self.decimation or working_decimation(frame.intrinsics)
+        if step == 1:
+            return frame
+        k = frame.intrinsics
+        # Pixel (step i, step j) becomes (i, j): u_old = step * u_new, so the focal
+        # lengths and the principal point divide by step.
+        depth = np.ascontiguousarray(frame.depth[::step, ::step])
+        working = Intrinsics(
+            fx=k.fx / step,
+            fy=k.fy / step,
+            cx=k.cx / step,
+            cy=k.cy / step,
+            width=depth.shape[1],
+            height=depth.shape[0],
+        )
+        return replace(frame, depth=depth, intrinsics=working)
+
+    def _working_background(self, shape: tuple[int, int]) -> BackgroundModel | None:
+        """The background model at the working resolution (subsampled once, then kept)."""
+        bg = self.background
+        if bg is None or bg.depth_ is None or bg.depth_.shape == shape:
+            return bg
+        step = -(-bg.depth_.shape[0] // shape[0])
+        if step not in self._working_backgrounds:
+            sub = copy.copy(bg)
+            sub.depth_ = np.ascontiguousarray(bg.depth_[::step, ::step])
+            self._working_backgrounds[step] = sub
+        return self._working_backgrounds[step]
+
     def _segment(self, frame: DepthFrame) -> np.ndarray:
         """The person's pixels: first within a depth band around the last frame's person.
 
@@ -450,7 +516,7 @@ class PoseTracker:
         stays put).
         """
         options = {
-            "background": self.background,
+            "background": self._working_background(frame.depth.shape),
             "rng": 0,
             **self.segment_options,
             "floor": self._floor,
