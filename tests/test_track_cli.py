@@ -256,3 +256,27 @@ def test_interrupted_track_says_so_and_keeps_what_was_done(sequence, tmp_path, m
     assert f"interrupted at frame 3 of {n}" in result.output
     assert "hold the 3 frames processed so far" in result.output
     assert [f["index"] for f in json.loads((out / "poses.json").read_text())["frames"]] == [0, 1, 2]
+
+
+def test_track_decimation_option(tmp_path):
+    from posedrift.camera import camera_preset
+
+    vga = camera_preset("kinect1-vga")
+    seq = build_sequence(procedural_motion(), n_frames=3, intrinsics=vga, rng=0)
+    stack = np.stack([np.rint(f.depth * 1000).astype(np.uint16) for f in seq.frames])
+    np.save(tmp_path / "vga.npy", stack)
+    joints = {}
+    for option in ([], ["--decimation", "2"], ["--decimation", "1"]):
+        out = tmp_path / ("o" + "".join(option))
+        args = ["-q", "track", str(tmp_path / "vga.npy"), "--out", str(out), "--no-video"]
+        result = runner.invoke(app, [*args, "--camera", "kinect1-vga", *option])
+        assert result.exit_code == 0, result.output
+        rows = read_poses(out / "poses.json")
+        joints[tuple(option)] = np.array([r["joints"] for r in rows], dtype=float)
+        assert np.isfinite(joints[tuple(option)]).all()
+    # The default for a 640 x 480 camera is every other pixel.
+    np.testing.assert_array_equal(joints[()], joints[("--decimation", "2")])
+    bad = runner.invoke(
+        app, ["track", str(tmp_path / "vga.npy"), "--out", "x", "--decimation", "0"]
+    )
+    assert bad.exit_code == 2 and "--decimation" in bad.output

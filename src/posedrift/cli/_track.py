@@ -37,6 +37,15 @@ def track(
         int, typer.Option("--points", min=20, help="Points per frame after downsampling.")
     ] = 400,
     unmirror: UnmirrorOption = None,
+    decimation: Annotated[
+        int | None,
+        typer.Option(
+            "--decimation",
+            min=1,
+            help="Work on every N-th pixel of every N-th row (default: 2 for 640 x 480 "
+            "cameras, 1 at 320 x 240; 1 keeps every pixel).",
+        ),
+    ] = None,
     video: Annotated[bool, typer.Option("--video/--no-video", help="Write tracking.gif.")] = True,
     viewer: Annotated[
         bool, typer.Option("--viewer/--no-viewer", help="Write the HTML 3-D viewer.")
@@ -95,7 +104,7 @@ def track(
         )
     except (OSError, ValueError) as exc:
         raise fail(str(exc)) from exc
-    tracker = PoseTracker(reader.intrinsics, n_points=n_points)
+    tracker = PoseTracker(reader.intrinsics, n_points=n_points, decimation=decimation)
     results: list[FrameResult] = []
     frames: list = []
     unreadable = 0
