@@ -396,6 +396,41 @@ def test_training_frames_are_seeded_and_show_a_person():
         next(synthetic_training_frames(1, [motion], weights=[0.0], rng=0))
 
 
+def test_mirrored_poses_render_as_mirror_images_with_sides_swapped():
+    from posedrift.labelling._train import _facing, mirror_pose, render_training_frame
+    from posedrift.synthetic import BodyModel, procedural_motion
+
+    motion = procedural_motion()
+    # The script's most asymmetric pose (one arm forward, the other sideways...) among
+    # those facing +Z, where a mirror image is not just the person turned the other way.
+    frontal = [abs(_facing(j)[0]) < 0.02 for j in motion.joints]
+    gap = [np.abs(mirror_pose(j, {})[0] - j).max() * f for j, f in zip(motion.joints, frontal)]
+    t = int(np.argmax(gap))
+    joints = motion.joints[t]
+    extras = {name: v[t] for name, v in motion.extras.items()}
+    again, extras_again = mirror_pose(*mirror_pose(joints, extras))
+    np.testing.assert_allclose(again, joints, atol=1e-12)  # mirroring twice: the identity
+    assert all(np.allclose(extras_again[k], extras[k]) for k in extras)
+    body, k = BodyModel.load_default(), camera_preset("kinect1-qvga")
+    view = {"yaw": 0.0, "distance": 2.8, "camera_height": 1.0, "aim_at_body": False}
+    view |= {"aim": 0.0, "noise": False}
+    plain = render_training_frame(joints, extras, body, k, rng=0, **view)
+    mirrored = render_training_frame(*mirror_pose(joints, extras), body, k, rng=0, **view)
+    # The mirror image is the picture flipped left-right, with each part's side swapped.
+    swap = np.arange(len(PART_NAMES) + 1)
+    for i, name in enumerate(PART_NAMES):
+        for a, b in (("left_", "right_"), ("right_", "left_")):
+            if name.startswith(a):
+                swap[i + 1] = PART_NAMES.index(b + name[len(a) :]) + 1
+    # Column u mirrors to 2 cx - u = 320 - u: flip the columns and shift them by one.
+    flipped = np.zeros_like(plain.labels)
+    flipped[:, 1:] = swap[plain.labels[:, ::-1]][:, :-1]
+    person = (flipped > 0) | (mirrored.labels > 0)
+    agree = np.mean(flipped[person] == mirrored.labels[person])
+    assert agree > 0.9
+    assert np.mean(plain.labels[person] == mirrored.labels[person]) < agree - 0.1
+
+
 def test_fast_descents_reach_the_same_leaves(toy_forest, monkeypatch):
     """The compiled and the few-pixel (fused) descents equal the plain NumPy one."""
     from posedrift.labelling import _forest

@@ -69,6 +69,15 @@ def train(
             "--wide-yaw", min=0.0, max=180.0, help="Largest turn of the wide views, degrees."
         ),
     ] = 100.0,
+    mirror_share: Annotated[
+        float,
+        typer.Option(
+            "--mirror-share",
+            min=0.0,
+            max=1.0,
+            help="Share of frames whose pose is mirrored left for right.",
+        ),
+    ] = 0.0,
     min_pose_distance: Annotated[
         float,
         typer.Option(
@@ -129,7 +138,9 @@ def train(
             pose_frames.append(np.arange(len(motions[-1].joints)))
         else:
             weights = [(1.0 - share) / max(n_clips, 1)] * n_clips + [share]
-        ranges = tr.SceneRanges(wide_fraction=wide_share, wide_yaw=wide_yaw)
+        ranges = tr.SceneRanges(
+            wide_fraction=wide_share, wide_yaw=wide_yaw, mirror_fraction=mirror_share
+        )
         generator = tr.synthetic_training_frames(
             frames, motions, ranges=ranges, weights=weights, frames=pose_frames, rng=render_rng
         )
@@ -142,6 +153,7 @@ def train(
             "procedural_share": share,
             "wide_share": wide_share,
             "wide_yaw": wide_yaw,
+            "mirror_share": mirror_share,
             "min_pose_distance": min_pose_distance,
         }
         with tr._progress(progress_enabled(), "rendering + features", frames) as advance:

@@ -551,6 +551,9 @@ class SceneRanges:
         Metres.
     wide_aim, wide_yaw : float
         Degrees.
+    mirror_fraction : float
+        Share of frames whose pose is mirrored left for right (:func:`mirror_pose`):
+        every asymmetric clip pose then also appears the other way round.
     """
 
     height: tuple[float, float] = (1.5, 1.95)
@@ -564,6 +567,58 @@ class SceneRanges:
     wide_distance: tuple[float, float] = (1.0, 4.5)
     wide_aim: float = 25.0
     wide_yaw: float = 100.0
+    mirror_fraction: float = 0.0
+
+
+def mirror_pose(
+    joints: np.ndarray, extras: dict[str, np.ndarray]
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """A pose reflected left for right: x negated about the pelvis, left and right swapped.
+
+    Parameters
+    ----------
+    joints : (15, 3) float
+        World frame (+Y up).
+    extras : dict of str to (3,) float
+        Named extra points (``left_hand_tip``, ``right_toe``, ...).
+
+    Returns
+    -------
+    joints, extras
+        The mirror image: the left hand goes where the right one was, reflected.
+
+    Examples
+    --------
+    >>> from posedrift.skeleton import JOINT_INDEX, t_pose_joints
+    >>> j = t_pose_joints(1.75)
+    >>> j[JOINT_INDEX["left_hand"]] += [0.0, 0.3, 0.0]  # the left hand raised
+    >>> m, _ = mirror_pose(j, {})
+    >>> bool(m[JOINT_INDEX["right_hand"], 1] > m[JOINT_INDEX["left_hand"], 1])
+    True
+    """
+    from posedrift.skeleton import JOINT_NAMES
+
+    joints = np.asarray(joints, dtype=float)
+    centre = 0.5 * (
+        joints[JOINT_NAMES.index("left_hip"), 0] + joints[JOINT_NAMES.index("right_hip"), 0]
+    )
+
+    def reflect(p: np.ndarray) -> np.ndarray:
+        q = np.array(p, dtype=float)
+        q[..., 0] = 2.0 * centre - q[..., 0]
+        return q
+
+    def other(name: str) -> str:
+        if name.startswith("left_"):
+            return "right_" + name[5:]
+        if name.startswith("right_"):
+            return "left_" + name[6:]
+        return name
+
+    order = [JOINT_NAMES.index(other(n)) for n in JOINT_NAMES]
+    mirrored = reflect(joints)[order]
+    extras_out = {name: reflect(extras[other(name)]) for name in extras if other(name) in extras}
+    return mirrored, extras_out
 
 
 def _stature(joints: np.ndarray) -> float:
@@ -836,6 +891,9 @@ def synthetic_training_frames(
         height = shape["height"]
         joints = np.asarray(motion.joints[t], dtype=float)
         extras = {name: np.asarray(v[t], dtype=float) for name, v in (motion.extras or {}).items()}
+        # Drawn only when asked for, so that the default's random stream is unchanged.
+        if ranges.mirror_fraction > 0 and rng.uniform() < ranges.mirror_fraction:
+            joints, extras = mirror_pose(joints, extras)
         scale = height / statures[k]
         origin = np.array([joints[:, 0].mean(), 0.0, joints[:, 2].mean()])
         joints = origin + (joints - origin) * scale
