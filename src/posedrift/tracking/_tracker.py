@@ -440,7 +440,8 @@ class PoseTracker:
             usable = attempt is not None and np.isfinite(attempt.fit.joints).all()
             if not usable:
                 reason = "no usable body-part labels" if attempt is None else attempt.health.reason
-                self._state = None
+                # Whatever was segmented is no person we can fit: search every depth next.
+                self._state = self._person_depth = None
                 timings["total"] = 1e3 * (time.perf_counter() - t0)
                 return FrameResult.empty(
                     frame.index,
