@@ -408,9 +408,9 @@ def _camera_text(sequence) -> str:
     """``"320x240 px, fx 285.6, person 2.8 m away"`` for a rendered sequence."""
     k = sequence.frames[0].intrinsics
     text = f"{k.width}x{k.height} px, fx {k.fx:.1f}"
-    pelvis = getattr(sequence.reference, "joints", None)
-    if pelvis is not None and len(pelvis):
-        text += f", person {float(np.nanmedian(pelvis[:, :, 2])):.1f} m away"
+    joints = getattr(sequence.reference, "joints", None)
+    if joints is not None and len(joints):
+        text += f", person {float(np.nanmedian(joints[:, :, 2])):.1f} m away"
     return text
 
 
