@@ -176,6 +176,7 @@ def test_eval_synthetic_cli_schema_and_skip(mocap_dir, tmp_path, monkeypatch):
         "camera",
         "distance",
         "in_place",
+        "there_and_back",
         "body",
         "skipped",
     }

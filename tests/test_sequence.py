@@ -303,6 +303,29 @@ def test_rewriting_a_folder_drops_stale_frames(sequence, tmp_path):
     assert len(read_synthetic(tmp_path).frames) == 2
 
 
+@pytest.mark.parametrize("n_frames", [8, 9])
+def test_there_and_back_repeats_the_first_poses_in_reverse(body, n_frames):
+    motion = _arms_down_motion(n=12)
+    forward = build_sequence(motion, body=body, n_frames=n_frames)
+    both = build_sequence(motion, body=body, n_frames=n_frames, there_and_back=True)
+    assert len(both.frames) == n_frames
+    half = -(-n_frames // 2)
+    ref = both.reference
+    for t in range(n_frames):
+        np.testing.assert_array_equal(ref.joints[t], ref.joints[n_frames - 1 - t])
+        np.testing.assert_array_equal(both.frames[t].depth, both.frames[n_frames - 1 - t].depth)
+        np.testing.assert_array_equal(ref.labels[t], ref.labels[n_frames - 1 - t])
+    # The first half is the clip as played forward; time still runs forward.
+    np.testing.assert_array_equal(ref.joints[:half], forward.reference.joints[:half])
+    assert [f.timestamp for f in both.frames] == [f.timestamp for f in forward.frames]
+
+
+def test_there_and_back_of_a_short_clip_plays_all_of_it_both_ways(body):
+    seq = build_sequence(_arms_down_motion(n=4), body=body, n_frames=20, there_and_back=True)
+    assert len(seq.frames) == 8  # its 4 frames forward, then backward
+    np.testing.assert_array_equal(seq.reference.joints[:4], seq.reference.joints[:3:-1])
+
+
 def test_in_place_keeps_a_walking_person_in_view_with_the_same_angles(body):
     base = _arms_down_motion(n=30)
     walk = np.linspace(0.0, 2.4, len(base))  # 2.4 m towards the camera

@@ -96,6 +96,15 @@ def eval_synthetic(
             "(the protocol's setting; angles unchanged), or keep the clip's own travel.",
         ),
     ] = True,
+    there_and_back: Annotated[
+        bool,
+        typer.Option(
+            "--there-and-back/--forward",
+            help="Play the first half of the frames forward, then backward, so that the last "
+            "frames repeat the first ones' poses (the drift test: per_sequence first_100_deg "
+            "against last_100_deg).",
+        ),
+    ] = False,
     json_out: Annotated[
         Path | None, typer.Option("--json", help="Write the results (JSON) here.")
     ] = None,
@@ -171,6 +180,7 @@ def eval_synthetic(
                 noise=noise,
                 background=room,
                 in_place=in_place,
+                there_and_back=there_and_back,
                 **placement,
                 shape=shape,
                 stature=height,
@@ -211,6 +221,7 @@ def eval_synthetic(
     report["camera"] = camera or "kinect1-qvga"
     report["distance"] = distance
     report["in_place"] = bool(in_place)
+    report["there_and_back"] = bool(there_and_back)
     report["body"] = {"height": height, "girth": girth}
     _finish(report, skipped, json_out, paper)
 

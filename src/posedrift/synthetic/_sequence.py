@@ -86,6 +86,7 @@ def build_sequence(
     stature: float | None = None,
     calibration: bool = True,
     in_place: bool = False,
+    there_and_back: bool = False,
     rng: int | np.random.Generator | None = None,
     name: str | None = None,
     on_frame: Callable[[int, int], None] | None = None,
@@ -139,6 +140,11 @@ def build_sequence(
         Remove the pelvis's horizontal travel (a treadmill view): turns, jumps and
         squats stay, but a walking person stays at ``distance`` in view, as the
         protocol's person facing the camera at about 2.8 m. Angles do not change.
+    there_and_back : bool
+        Play the first half of the ``n_frames`` forward, then backward: frame
+        ``n_frames - 1 - t`` repeats the pose of frame ``t``. The drift protocol: the
+        last frames are the first ones' poses, so any difference in error between
+        them is the method's drift, not a harder end of the clip.
     rng : int, numpy.random.Generator or None
         Seed or generator for the noise.
     name : str, optional
@@ -193,10 +199,10 @@ def build_sequence(
         clip = _scaled(clip, body, stature)
     if in_place:
         clip = _in_place(clip)
-    total = len(clip)
-    if n_frames is not None and n_frames > total:
-        logger.info("clip %s has %d frames at %g fps; %d asked", clip.name, total, fps, n_frames)
-    count = total if n_frames is None else min(n_frames, total)
+    order = _frame_order(len(clip), n_frames, there_and_back)
+    if n_frames is not None and len(order) < n_frames:
+        logger.info("clip %s has %d frames at %g fps; %d asked", clip.name, len(clip), fps, n_frames)
+    count = len(order)
 
     camera = place_camera(clip, distance=distance, height=camera_height)
     scene = None
@@ -207,8 +213,8 @@ def build_sequence(
 
     faces = np.asarray(body.faces)
     parts = np.asarray(body.vertex_parts)
-    joints_world = np.asarray(clip.joints[:count], dtype=float)
-    extras = {key: np.asarray(value) for key, value in (clip.extras or {}).items()}
+    joints_world = np.asarray(clip.joints, dtype=float)[order]
+    extras = {key: np.asarray(value)[order] for key, value in (clip.extras or {}).items()}
     frames: list[DepthFrame] = []
     labels: list[np.ndarray] = []
     for t in range(count):
@@ -243,6 +249,21 @@ def build_sequence(
         kind="synthetic",
     )
     return EvaluationSequence(name=seq_name, frames=tuple(frames), reference=reference, fps=fps)
+
+
+def _frame_order(total: int, n_frames: int | None, there_and_back: bool) -> np.ndarray:
+    """Which clip frame each sequence frame shows: the first ``n_frames``, or there and back.
+
+    There and back: the first ``ceil(n_frames / 2)`` frames (the whole clip for None)
+    forward, then the same backward, the turning frame once where ``n_frames`` is odd.
+    """
+    if not there_and_back:
+        return np.arange(total if n_frames is None else min(n_frames, total))
+    half = total if n_frames is None else min(-(-n_frames // 2), total)
+    order = np.concatenate([np.arange(half), np.arange(half)[::-1]])
+    if n_frames is not None and len(order) > n_frames:
+        order = np.delete(order, half)
+    return order
 
 
 def _in_place(clip: Motion) -> Motion:
