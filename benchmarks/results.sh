@@ -40,6 +40,14 @@ start=$(date +%s)
 posedrift -q eval synthetic builtin --frames 500 --methods "$methods,cpd-paper" \
     --json "$out/drift.json" | tee "$out/drift.md"
 echo "500 frames, $methods,cpd-paper: $(( $(date +%s) - start )) s wall" | tee "$out/drift_time.txt"
+# Drift on the same poses at both ends: each clip's first 250 frames forward, then backward.
+posedrift -q eval synthetic builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" "$M/cmu/002_10.bvh" \
+    "$M/cmu/001_08.bvh" "$M/cmu-original-skeleton/131_03.bvh" "$M/cmu/007_03.bvh" \
+    "$M/cmu/007_05.bvh" --frames 500 --there-and-back --methods cpd,shotton,icp \
+    --json "$out/there_and_back.json" | tee "$out/there_and_back.md"
+# How much of the error the labels cause: the tracker, with a perfect forest, true labels.
+python "$here/benchmarks/label_oracle.py" builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" \
+    "$M/cmu/002_10.bvh" "$M/cmu/001_08.bvh" --frames 500 | tee "$out/label_oracle.md"
 # Real Kinect recordings: one sequence per action, subject (a mod 4) + 1, trial 1.
 seqs=$(for a in $(seq 1 27); do printf "a%d_s%d_t1," "$a" $(( a % 4 + 1 )); done)
 posedrift -q eval utd "$data/utd-mhad" --sequences "${seqs%,}" --methods "$methods" \

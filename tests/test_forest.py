@@ -404,7 +404,10 @@ def test_mirrored_poses_render_as_mirror_images_with_sides_swapped():
     # The script's most asymmetric pose (one arm forward, the other sideways...) among
     # those facing +Z, where a mirror image is not just the person turned the other way.
     frontal = [abs(_facing(j)[0]) < 0.02 for j in motion.joints]
-    gap = [np.abs(mirror_pose(j, {})[0] - j).max() * f for j, f in zip(motion.joints, frontal)]
+    gap = [
+        np.abs(mirror_pose(j, {})[0] - j).max() * f
+        for j, f in zip(motion.joints, frontal, strict=True)
+    ]
     t = int(np.argmax(gap))
     joints = motion.joints[t]
     extras = {name: v[t] for name, v in motion.extras.items()}

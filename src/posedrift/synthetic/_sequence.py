@@ -201,7 +201,9 @@ def build_sequence(
         clip = _in_place(clip)
     order = _frame_order(len(clip), n_frames, there_and_back)
     if n_frames is not None and len(order) < n_frames:
-        logger.info("clip %s has %d frames at %g fps; %d asked", clip.name, len(clip), fps, n_frames)
+        logger.info(
+            "clip %s has %d frames at %g fps; %d asked", clip.name, len(clip), fps, n_frames
+        )
     count = len(order)
 
     camera = place_camera(clip, distance=distance, height=camera_height)
