@@ -197,6 +197,13 @@ def test_health_reports_a_floating_joint_and_all_unknown_labels():
     assert not health.ok and health.reason.startswith("the right_foot is")
     assert np.isnan(bone_distances(points, np.full(len(points), -1), joints)).all()
     assert _PART_REACH.shape == (15,)
+    # A foot outside the camera's view (below the image) is not judged by its gap.
+    in_view = np.ones(15, bool)
+    in_view[_J["right_foot"]] = False
+    kw = {"height": 1.75, "max_unexplained": 1.0}
+    assert assess(points, labels, joints, np.ones(15, bool), in_view=in_view, **kw).ok
+    in_view[_J["right_foot"]], in_view[_J["left_hand"]] = True, False
+    assert not assess(points, labels, joints, np.ones(15, bool), in_view=in_view, **kw).ok
 
 
 @pytest.mark.parametrize("seed", range(12))

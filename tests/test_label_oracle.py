@@ -1,4 +1,4 @@
-"""The perfect-label controls of ``benchmarks/label_oracle.py`` (read ground truth; never the method)."""
+"""The perfect-label controls of ``benchmarks/label_oracle.py`` (they read ground truth)."""
 
 from __future__ import annotations
 

@@ -280,3 +280,23 @@ def test_track_decimation_option(tmp_path):
         app, ["track", str(tmp_path / "vga.npy"), "--out", "x", "--decimation", "0"]
     )
     assert bad.exit_code == 2 and "--decimation" in bad.output
+
+
+def test_track_height_option_sets_the_stature(tmp_path):
+    seq = build_sequence(procedural_motion(), n_frames=2, rng=0)
+    stack = np.stack([np.rint(f.depth * 1000).astype(np.uint16) for f in seq.frames])
+    np.save(tmp_path / "d.npy", stack)
+    widths = {}  # neck to head, metres
+    for height in ("1.5", "2.0"):
+        out = tmp_path / height
+        args = ["-q", "track", str(tmp_path / "d.npy"), "--out", str(out), "--no-video"]
+        result = runner.invoke(app, [*args, "--camera", "kinect1-qvga", "--height", height])
+        assert result.exit_code == 0, result.output
+        joints = np.array(read_poses(out / "poses.json")[0]["joints"], dtype=float)
+        head, neck = JOINT_NAMES.index("head"), JOINT_NAMES.index("neck")
+        widths[height] = np.linalg.norm(joints[head] - joints[neck])
+    # The neck-to-head bone is the stature's share (the limbs are measured): it follows
+    # the stature given.
+    assert widths["2.0"] / widths["1.5"] == pytest.approx(2.0 / 1.5, rel=1e-6)
+    bad = runner.invoke(app, ["track", str(tmp_path / "d.npy"), "--out", "x", "--height", "9"])
+    assert bad.exit_code == 2 and "--height" in bad.output

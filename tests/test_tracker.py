@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from posedrift.camera import DepthFrame, camera_preset
-from posedrift.skeleton import JOINT_NAMES, JOINT_PARENTS, joint_angles
+from posedrift.skeleton import ANGLE_NAMES, JOINT_NAMES, JOINT_PARENTS, joint_angles
 from posedrift.tracking import FrameResult, FrameStatus, PoseTracker
 
 K = camera_preset("kinect1-qvga")
@@ -319,3 +319,24 @@ def test_fused_tracker_keeps_its_labels_on_a_rendered_clip(sequence):
     est = np.array([r.joints for r in results])
     errors = np.abs(joint_angles(est) - sequence.reference.angles)
     assert np.nanmean(errors) < FUSED_ANGLE_ERROR  # degrees
+
+
+def test_a_person_too_near_the_camera_is_measured_and_tracked():
+    """At 1.6 m the person runs off the image's top and bottom (head and feet cut off)."""
+    from posedrift.synthetic import build_sequence, procedural_motion
+
+    near = build_sequence(procedural_motion(), n_frames=40, rng=0, distance=1.6)
+    person = near.reference.labels[0] > 0
+    assert person[0].any() and person[-1].any()
+    far = PoseTracker(K)
+    far.process(build_sequence(procedural_motion(), n_frames=1, rng=0).frames[0])
+    tracker = PoseTracker(K)
+    results = _run(tracker, near.frames)
+    # The cut-off silhouette is 1.3 m tall; the limbs' lengths say how tall the person is.
+    assert tracker.calibration.height == pytest.approx(far.calibration.height, rel=0.1)
+    # Feet below the image are not "floating away from the body": no re-initialization.
+    statuses = [r.status for r in results]
+    assert statuses.count(FrameStatus.TRACKED) == len(results) - 1
+    errors = np.abs(joint_angles(np.array([r.joints for r in results])) - near.reference.angles)
+    seen = [i for i, name in enumerate(ANGLE_NAMES) if not name.endswith("knee")]
+    assert np.nanmean(errors[:, seen]) < 8.0  # degrees (the knees' ankles are out of view)

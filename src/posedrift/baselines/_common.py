@@ -128,13 +128,14 @@ def estimate_stature(points: np.ndarray) -> float:
     return float(1.01 * (np.percentile(y, 99.8) - np.percentile(y, 0.2)))
 
 
-def calibrate_bones(lab: LabelledPixels) -> tuple[float, np.ndarray]:
+def calibrate_bones(lab: LabelledPixels, image_rows: int | None = None) -> tuple[float, np.ndarray]:
     """Stature and bone lengths from one labelled frame, as the tracker calibrates them.
 
     :func:`posedrift.tracking._init.calibrate` on the frame's labelled pixels (the
     same measurement the tracker makes on its first frame), so that every method
-    uses the same skeleton. Falls back on :func:`estimate_stature` and the prior
-    ratios where it cannot run.
+    uses the same skeleton; ``image_rows`` (the frame's height in pixels) tells it
+    whether the person runs off the image's top or bottom. Falls back on
+    :func:`estimate_stature` and the prior ratios where it cannot run.
 
     Returns
     -------
@@ -154,8 +155,15 @@ def calibrate_bones(lab: LabelledPixels) -> tuple[float, np.ndarray]:
         remap[keep] = np.arange(len(keep))
         rows, cols = remap[lab.edges[0]], remap[lab.edges[1]]
         ok = (rows >= 0) & (cols >= 0)
+        truncated = image_rows is not None and bool(
+            np.any(lab.pixels[:, 0] == 0) or np.any(lab.pixels[:, 0] == image_rows - 1)
+        )
         cal = calibrate(
-            lab.points[keep], lab.labels[keep], (rows[ok], cols[ok]), full_points=lab.points
+            lab.points[keep],
+            lab.labels[keep],
+            (rows[ok], cols[ok]),
+            full_points=lab.points,
+            truncated=truncated,
         )
         return float(cal.height), np.asarray(cal.bone_lengths, dtype=float)
     except (ImportError, ValueError, IndexError):

@@ -272,7 +272,7 @@ class PDABaseline:
                 frame.index, FrameStatus.NO_PERSON, "no person found", timestamp=frame.timestamp
             )
         if self.bone_lengths_ is None:
-            self.stature_, self.bone_lengths_ = calibrate_bones(lab)
+            self.stature_, self.bone_lengths_ = calibrate_bones(lab, frame.depth.shape[0])
         joints, conf, directions = pda_skeleton(
             lab.points,
             lab.labels,

@@ -146,7 +146,7 @@ class ShottonBaseline:
                 frame.index, FrameStatus.NO_PERSON, "no person found", timestamp=frame.timestamp
             )
         if self.bone_lengths_ is None:
-            self.stature_, self.bone_lengths_ = calibrate_bones(lab)
+            self.stature_, self.bone_lengths_ = calibrate_bones(lab, frame.depth.shape[0])
         # The skeleton fitting pushes each part's mode back by that part's radius (the
         # per-part form of Shotton's push-back): hand it the surface modes.
         _, modes = shotton_proposals(

@@ -46,6 +46,14 @@ def track(
             "cameras, 1 at 320 x 240; 1 keeps every pixel).",
         ),
     ] = None,
+    height: Annotated[
+        float | None,
+        typer.Option(
+            "--height",
+            help="The person's stature in metres, in [0.5, 2.6], if known (default: measured "
+            "on the first frame with a person).",
+        ),
+    ] = None,
     video: Annotated[bool, typer.Option("--video/--no-video", help="Write tracking.gif.")] = True,
     viewer: Annotated[
         bool, typer.Option("--viewer/--no-viewer", help="Write the HTML 3-D viewer.")
@@ -90,6 +98,8 @@ def track(
         raise fail(
             f"Unknown --convention {convention!r}: expected one of {', '.join(CONVENTIONS)}."
         )
+    if height is not None and not 0.5 <= height <= 2.6:
+        raise fail(f"--height must be in [0.5, 2.6] metres. Got {height:g}.")
     check_output_dir(out, "--out")
     if point_clouds:
         check_output_dir(out / "points", "--point-clouds")
@@ -104,7 +114,9 @@ def track(
         )
     except (OSError, ValueError) as exc:
         raise fail(str(exc)) from exc
-    tracker = PoseTracker(reader.intrinsics, n_points=n_points, decimation=decimation)
+    tracker = PoseTracker(
+        reader.intrinsics, n_points=n_points, decimation=decimation, height=height
+    )
     results: list[FrameResult] = []
     frames: list = []
     unreadable = 0

@@ -112,6 +112,7 @@ def assess(
     min_measured: float = 0.5,
     slack: float = 0.06,
     max_joint_gap: float = 0.15,
+    in_view: np.ndarray | None = None,
 ) -> Health:
     """Judge one frame's registration and skeleton fit.
 
@@ -134,6 +135,9 @@ def assess(
     max_joint_gap : float
         Largest distance (metres) from a limb joint to the nearest point: a hand
         or foot floating beside the body is lost.
+    in_view : (15,) bool, optional
+        Joints inside the camera's view; only those are held to ``max_joint_gap``
+        (a foot below the image's edge is far from every point and still fine).
 
     Returns
     -------
@@ -169,6 +173,8 @@ def assess(
             meas,
         )
     gaps = _joint_gaps(np.asarray(points, dtype=float), joints[_LIMBS])
+    if in_view is not None:
+        gaps = np.where(np.asarray(in_view, dtype=bool)[_LIMBS], gaps, 0.0)
     if gaps.max() > max_joint_gap * (height / 1.75):
         worst = _LIMB_NAMES[int(np.argmax(gaps))]
         return Health(

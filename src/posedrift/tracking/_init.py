@@ -77,6 +77,36 @@ def estimate_up(points: np.ndarray, labels: np.ndarray) -> np.ndarray:
     return up / np.linalg.norm(up)
 
 
+# Limb bones measured between ring joints at calibration: child joint -> parent joint.
+_LIMB_PARENTS = {
+    "hand": "elbow",  # forearm
+    "foot": "knee",  # shank
+    "knee": "hip",  # thigh
+    "elbow": "shoulder",  # upper arm
+}
+
+
+def _limb_ratios(centres, counts, height: float) -> dict[str, float]:
+    """Measured over expected length of each limb bone seen at both ends.
+
+    Left and right averaged; ratios outside [0.65, 1.4] (a misplaced boundary) dropped.
+    """
+    bones = prior_bone_lengths(height)
+    ring = {name: value[0] for name, value in ring_joints(centres, counts, height=height).items()}
+    ratios = {}
+    for child, parent in _LIMB_PARENTS.items():
+        found = []
+        for side in ("right", "left"):
+            a, b = f"{side}_{child}", f"{side}_{parent}"
+            if a in ring and b in ring:
+                ratio = float(np.linalg.norm(ring[a] - ring[b])) / bones[_J[a]]
+                if 0.65 <= ratio <= 1.4:
+                    found.append(ratio)
+        if found:
+            ratios[child] = float(np.mean(found))
+    return ratios
+
+
 def calibrate(
     points: np.ndarray,
     labels: np.ndarray,
@@ -84,6 +114,7 @@ def calibrate(
     *,
     full_points: np.ndarray | None = None,
     height: float | None = None,
+    truncated: bool = False,
 ) -> Calibration:
     """Measure stature, bone lengths and part reach from one labelled upright frame.
 
@@ -99,6 +130,11 @@ def calibrate(
         All the person's points (a better extent for the stature).
     height : float, optional
         A known stature (metres), which then is not measured.
+    truncated : bool
+        The person runs off the top or the bottom of the image (too near the camera):
+        their extent then only bounds the stature from below, and the stature is
+        scaled up until the limb bones measured between part boundaries agree with
+        it (the segment ratios of a body that tall).
 
     Returns
     -------
@@ -107,6 +143,9 @@ def calibrate(
     points = np.asarray(points, dtype=float)
     labels = np.asarray(labels).astype(np.int64)
     up = estimate_up(points, labels)
+    measure = height is None
+    rows, cols = edges
+    centres, counts = part_boundaries(points, labels, rows, cols)
     if height is None:
         cloud = points if full_points is None else np.asarray(full_points, dtype=float)
         proj = cloud @ up
@@ -114,31 +153,18 @@ def calibrate(
         # scalp that a frontal view cannot see.
         lo, hi = np.percentile(proj, [0.2, 99.8])
         height = float(np.clip(hi - lo + 0.02, 0.9, 2.3))
+    ratios = _limb_ratios(centres, counts, height)
+    for _ in range(4 if measure and truncated else 0):
+        # A cut-off silhouette is shorter than the person: grow the stature by the
+        # limbs' measured-to-expected length until they agree (never shrink it).
+        scale = float(np.median(list(ratios.values()))) if ratios else 1.0
+        if scale < 1.02 or height >= 2.3:
+            break
+        height = float(min(height * scale, 2.3))
+        ratios = _limb_ratios(centres, counts, height)
     bones = prior_bone_lengths(height)
-    rows, cols = edges
-    centres, counts = part_boundaries(points, labels, rows, cols)
-    ring = {name: value[0] for name, value in ring_joints(centres, counts, height=height).items()}
-    # Limb bones measured between ring joints where both ends are seen; left and right
-    # averaged; a bone measured on neither side takes the prior scaled like the others.
-    pairs = {
-        "hand": "elbow",  # forearm
-        "foot": "knee",  # shank
-        "knee": "hip",  # thigh
-        "elbow": "shoulder",  # upper arm
-    }
-    ratios = {}
-    for child, parent in pairs.items():
-        found = []
-        for side in ("right", "left"):
-            a, b = f"{side}_{child}", f"{side}_{parent}"
-            if a in ring and b in ring:
-                ratio = float(np.linalg.norm(ring[a] - ring[b])) / bones[_J[a]]
-                if 0.65 <= ratio <= 1.4:
-                    found.append(ratio)
-        if found:
-            ratios[child] = float(np.mean(found))
     scale = float(np.median(list(ratios.values()))) if ratios else 1.0
-    for child in pairs:
+    for child in _LIMB_PARENTS:
         for side in ("right", "left"):
             bones[_J[f"{side}_{child}"]] *= ratios.get(child, scale)
     reach = prior_reach(height)

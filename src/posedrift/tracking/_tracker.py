@@ -699,8 +699,22 @@ class PoseTracker:
             fit.measured,
             height=cal.height,
             sigma=sigma,
+            in_view=self._in_view(fit.joints),
         )
         return _Attempt(labels=labels, fit=fit, health=health)
+
+    def _in_view(self, joints: np.ndarray) -> np.ndarray:
+        """``(15,)`` whether each joint projects inside the image (in front of the camera)."""
+        k = self.intrinsics
+        with np.errstate(invalid="ignore", divide="ignore"):
+            uv = project(joints, k)
+            return (
+                (joints[:, 2] > 0)
+                & (uv[:, 0] >= 0)
+                & (uv[:, 0] <= k.width - 1)
+                & (uv[:, 1] >= 0)
+                & (uv[:, 1] <= k.height - 1)
+            )
 
     # ------------------------------------------------------------------ initialization
     def _get_forest(self):
@@ -760,7 +774,12 @@ class PoseTracker:
         fresh_calibration = self._calibration is None
         if fresh_calibration:
             self._calibration = calibrate(
-                points, labels, (graph.rows, graph.cols), full_points=full, height=self.height
+                points,
+                labels,
+                (graph.rows, graph.cols),
+                full_points=full,
+                height=self.height,
+                truncated=bool(mask[0].any() or mask[-1].any()),
             )
         # Joints the labels do not support come from the last pose, moved with the body.
         guess = None
