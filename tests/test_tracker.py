@@ -340,3 +340,15 @@ def test_a_person_too_near_the_camera_is_measured_and_tracked():
     errors = np.abs(joint_angles(np.array([r.joints for r in results])) - near.reference.angles)
     seen = [i for i, name in enumerate(ANGLE_NAMES) if not name.endswith("knee")]
     assert np.nanmean(errors[:, seen]) < 8.0  # degrees (the knees' ankles are out of view)
+
+
+def test_joints_in_view_are_those_projecting_inside_the_image():
+    tracker = PoseTracker(K)
+    joints = np.tile([0.0, 0.0, 2.0], (15, 1))  # the principal point, 2 m away
+    joints[1] = [5.0, 0.0, 2.0]  # far to the right of the image
+    joints[2] = [0.0, -5.0, 2.0]  # above it
+    joints[3] = [0.0, 0.0, -1.0]  # behind the camera
+    joints[4] = np.nan  # unknown
+    expected = np.ones(15, bool)
+    expected[1:5] = False
+    np.testing.assert_array_equal(tracker._in_view(joints), expected)

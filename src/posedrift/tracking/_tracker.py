@@ -704,17 +704,14 @@ class PoseTracker:
         return _Attempt(labels=labels, fit=fit, health=health)
 
     def _in_view(self, joints: np.ndarray) -> np.ndarray:
-        """``(15,)`` whether each joint projects inside the image (in front of the camera)."""
+        """``(15,)`` whether each joint projects inside the image (False where unknown)."""
         k = self.intrinsics
-        with np.errstate(invalid="ignore", divide="ignore"):
-            uv = project(joints, k)
-            return (
-                (joints[:, 2] > 0)
-                & (uv[:, 0] >= 0)
-                & (uv[:, 0] <= k.width - 1)
-                & (uv[:, 1] >= 0)
-                & (uv[:, 1] <= k.height - 1)
-            )
+        out = np.zeros(len(joints), dtype=bool)
+        known = np.isfinite(joints).all(axis=1) & (joints[:, 2] > 0)
+        if known.any():
+            u, v = project(joints[known], k).T
+            out[known] = (u >= 0) & (u <= k.width - 1) & (v >= 0) & (v <= k.height - 1)
+        return out
 
     # ------------------------------------------------------------------ initialization
     def _get_forest(self):
