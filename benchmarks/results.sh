@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Reproduce the tables of docs/RESULTS.md (about 20 minutes on 2 cores).
+# Reproduce the tables of docs/RESULTS.md (about 25 minutes on 2 cores).
 # Usage: bash benchmarks/results.sh [OUT_DIR]   (needs ../shared/data or $POSEDRIFT_DATA)
 set -euo pipefail
 here="$(cd "$(dirname "$0")/.." && pwd)"
@@ -40,6 +40,16 @@ start=$(date +%s)
 posedrift -q eval synthetic builtin --frames 500 --methods "$methods,cpd-paper" \
     --json "$out/drift.json" | tee "$out/drift.md"
 echo "500 frames, $methods,cpd-paper: $(( $(date +%s) - start )) s wall" | tee "$out/drift_time.txt"
+# Other bodies: the held-out clips with a tall, thin and a short, wide person.
+for body in "1.95 0.9" "1.55 1.15"; do
+    set -- $body
+    posedrift -q eval synthetic "$M/cmu-original-skeleton/131_03.bvh" "$M/cmu/007_03.bvh" \
+        "$M/cmu/007_05.bvh" "$M/cmu/007_08.bvh" --frames 500 --height "$1" --girth "$2" \
+        --methods "$methods" --json "$out/body_$1.json" | tee "$out/body_$1.md"
+done
+# A person too near the camera (1.6 m: head and feet cut off by the image's edges).
+posedrift -q eval synthetic builtin "$M/cmu/007_03.bvh" "$M/cmu/007_05.bvh" "$M/cmu/002_07.bvh" \
+    --frames 300 --distance 1.6 --methods "$methods" --json "$out/near.json" | tee "$out/near.md"
 # Drift on the same poses at both ends: each clip's first 250 frames forward, then backward.
 posedrift -q eval synthetic builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" "$M/cmu/002_10.bvh" \
     "$M/cmu/001_08.bvh" "$M/cmu-original-skeleton/131_03.bvh" "$M/cmu/007_03.bvh" \
