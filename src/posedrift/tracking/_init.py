@@ -163,6 +163,7 @@ def calibrate(
         height = float(min(height * scale, 2.3))
         ratios = _limb_ratios(centres, counts, height)
     bones = prior_bone_lengths(height)
+    # A limb bone measured on neither side takes the prior scaled like the others.
     scale = float(np.median(list(ratios.values()))) if ratios else 1.0
     for child in _LIMB_PARENTS:
         for side in ("right", "left"):
