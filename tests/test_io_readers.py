@@ -454,3 +454,43 @@ def test_realsense_unplayable_bag_names_the_file(tmp_path):
     (tmp_path / "broken.bag").write_bytes(b"#ROSBAG V2.0\nnot really")
     with pytest.raises(ValueError, match=r"Cannot play back the RealSense recording .*broken\.bag"):
         open_depth_source(tmp_path / "broken.bag")
+
+
+_DYING_PLAYER = """
+import os, pickle, sys
+import numpy as np
+out = sys.stdout.buffer
+if sys.argv[1] == "describe":
+    stream = {"intrinsics": (52.0, 53.0, 31.0, 23.0, 64, 48), "width": 64, "height": 48,
+              "fps": 30, "units": 0.001}
+    pickle.dump(("stream", stream), out)
+    pickle.dump(("end",), out)
+    sys.exit(0)
+for i in range(2):
+    pickle.dump(("frame", i, i / 30.0, np.full((48, 64), 2800, np.uint16), ""), out)
+out.flush()
+sys.stderr.write("terminate called without an active exception\\n")
+sys.stderr.flush()
+os.abort()
+"""
+
+
+def test_realsense_playback_that_dies_keeps_its_frames(tmp_path, monkeypatch):
+    """librealsense aborting mid-recording costs only the frames it had not delivered."""
+    pytest.importorskip("pyrealsense2")
+    from posedrift.io import _realsense
+
+    def dying(path, mode):
+        return [sys.executable, "-c", _DYING_PLAYER, mode]
+
+    monkeypatch.setattr(_realsense, "_child_command", dying)
+    (tmp_path / "any.bag").write_bytes(b"")  # the stand-in player never opens it
+    source = open_depth_source(tmp_path / "any.bag")
+    items = list(source)
+    assert [type(item) for item in items] == [DepthFrame, DepthFrame, UnreadableFrame]
+    np.testing.assert_allclose(items[1].depth, 2.8)
+    assert items[2].index == 2
+    assert items[2].source.endswith("any.bag#2")
+    assert "SIGABRT" in items[2].message
+    assert "terminate called without an active exception" in items[2].message
+    assert len(source) == 3
