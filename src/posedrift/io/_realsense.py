@@ -79,10 +79,13 @@ class RealSenseSource(DepthSource):
         self._set_unmirror(unmirror)
         self._length: int | None = None
 
-    def _frames(self) -> Iterator[tuple[int, float, np.ndarray | None, str]]:
-        """``(index, timestamp_s, raw or None, message)`` for each depth frame."""
+    def _frames(self, mode: str = "frames") -> Iterator[tuple[int, float, np.ndarray | None, str]]:
+        """``(index, timestamp_s, raw or None, message)`` for each depth frame.
+
+        ``mode="count"`` plays the recording without sending its pixels (``raw`` None).
+        """
         index = 0
-        for message in _play(self.path, "frames"):
+        for message in _play(self.path, mode):
             if message[0] == "frame":
                 yield message[1:]
                 index += 1
@@ -100,7 +103,7 @@ class RealSenseSource(DepthSource):
     def __len__(self) -> int:
         """The number of depth frames (the first call plays the recording through once)."""
         if self._length is None:
-            self._length = sum(1 for _ in self._frames())
+            self._length = sum(1 for _ in self._frames("count"))
         return self._length
 
     def __iter__(self) -> Iterator[DepthFrame | UnreadableFrame]:
@@ -176,7 +179,11 @@ def _death(returncode: int, stderr: str) -> str:
 
 
 def _serve(path: str, mode: str) -> None:
-    """Play ``path`` and pickle its depth stream (and frames) to standard output."""
+    """Play ``path`` and pickle to standard output what ``mode`` asks for.
+
+    ``"describe"``: the depth stream; ``"count"``: one message per depth frame, without
+    its pixels; ``"frames"``: each depth frame.
+    """
     out = sys.stdout.buffer
     rs = _import_realsense()
     config = rs.config()
@@ -195,7 +202,7 @@ def _serve(path: str, mode: str) -> None:
     if mode == "describe":
         pickle.dump(_stream(rs, path, profile), out)
     else:
-        _send_frames(rs, pipeline, playback, out)
+        _send_frames(rs, pipeline, playback, out, pixels=mode == "frames")
     pipeline.stop()
     pickle.dump(("end",), out)
 
@@ -224,7 +231,7 @@ def _stream(rs, path: str, profile) -> tuple:
     )
 
 
-def _send_frames(rs, pipeline, playback, out) -> None:
+def _send_frames(rs, pipeline, playback, out, *, pixels: bool) -> None:
     first = None
     index = 0
     while True:
@@ -236,11 +243,12 @@ def _send_frames(rs, pipeline, playback, out) -> None:
             continue
         stamp_ms = depth.get_timestamp()
         first = stamp_ms if first is None else first
+        raw, message = None, ""
         try:
-            raw = np.array(depth.get_data(), dtype=np.uint16, copy=True)
-            message = ""
+            if pixels:
+                raw = np.array(depth.get_data(), dtype=np.uint16, copy=True)
         except (RuntimeError, ValueError) as exc:
-            raw, message = None, str(exc)
+            message = str(exc)
         pickle.dump(("frame", index, (stamp_ms - first) / 1000.0, raw, message), out)
         out.flush()  # the parent tracks each frame as it comes
         index += 1
