@@ -2,7 +2,7 @@
 
 librealsense plays a recording on its own threads, and those threads can abort the whole
 process while they shut down (seen on loaded machines, after every frame was delivered).
-So the playback runs in a child process (``python -m posedrift.io._realsense FILE``) that
+So the playback runs in a child process (``python -m posedrift.io._realsense FILE MODE``) that
 sends the stream's description and then each depth frame through a pipe, and leaves with
 ``os._exit`` once done, skipping librealsense's teardown. A child that dies early costs
 only the frames it had not sent: the source reports the rest as one unreadable frame.
