@@ -16,7 +16,7 @@ recovered joint to the Kinect SDK's in the recovered skeleton's body frame
 - the offsets fitted on all the given sequences, as Python source for
   ``src/posedrift/skeleton/_convention.py``.
 
-Refit whenever the tracker's skeleton changes. About 10 minutes for 108 sequences.
+Refit whenever the tracker's skeleton changes. About 75 s for 108 sequences (one core).
 """
 
 from __future__ import annotations

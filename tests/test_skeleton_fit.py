@@ -18,6 +18,7 @@ from posedrift.skeleton._fit import (
     RING_JOINTS,
     SEGMENT_RATIOS,
     SkeletonFit,
+    _anchor_shoulders,
     bone_anchors,
     fit_skeleton,
     part_axes,
@@ -125,6 +126,53 @@ def test_fit_skeleton_falls_back_on_the_prediction(rendered):
     bare = fit_skeleton(points[keep], labels[keep], bone_lengths=bones, edges=(sub.rows, sub.cols))
     assert np.isnan(bare.joints[J["right_hand"]]).all()
     assert bare.confidence[J["right_hand"]] == 0.0
+
+
+def _posed_t_pose(height=1.75):
+    """A T-pose turned 30 degrees about the vertical and 2.5 m in front of the camera."""
+    from scipy.spatial.transform import Rotation
+
+    from posedrift.skeleton import t_pose_joints
+
+    turn = Rotation.from_euler("y", 30, degrees=True).as_matrix()
+    return t_pose_joints(height) @ turn.T + [0.1, -0.2, 2.5]
+
+
+def test_anchored_shoulders_leave_a_t_pose_alone():
+    joints = _posed_t_pose()
+    bones = _true_bones(joints)
+    out = joints.copy()
+    _anchor_shoulders(out, bone_lengths=bones, height=1.75, weight=1.0)
+    np.testing.assert_allclose(out, joints, atol=1e-12)
+
+
+@pytest.mark.parametrize("weight", [0.3, 1.0])
+def test_anchored_shoulders_move_towards_the_trunk_and_carry_the_arm(weight):
+    joints = _posed_t_pose()
+    bones = _true_bones(joints)
+    arm = [J[f"left_{j}"] for j in ("shoulder", "elbow", "hand")]
+    moved = joints.copy()
+    moved[arm] += [0.0, 0.06, -0.04]  # the arm's shoulder placed 7 cm off the trunk
+    out = moved.copy()
+    _anchor_shoulders(out, bone_lengths=bones, height=1.75, weight=weight)
+    shoulder, elbow, hand = arm
+    np.testing.assert_allclose(
+        out[shoulder], (1 - weight) * moved[shoulder] + weight * joints[shoulder], atol=1e-12
+    )
+    # The upper arm keeps its length and turns to the elbow; the forearm is carried along.
+    assert abs(np.linalg.norm(out[elbow] - out[shoulder]) - bones[elbow]) < 1e-12
+    np.testing.assert_allclose(out[hand] - out[elbow], moved[hand] - moved[elbow], atol=1e-12)
+    # The other arm, already on the trunk, and every other joint stay put.
+    others = np.setdiff1d(np.arange(15), arm)
+    np.testing.assert_allclose(out[others], moved[others], atol=1e-12)
+
+
+def test_anchored_shoulders_need_the_trunk():
+    joints = _posed_t_pose()
+    joints[J["right_hip"]] = np.nan
+    out = joints.copy()
+    _anchor_shoulders(out, bone_lengths=_true_bones(_posed_t_pose()), height=1.75, weight=1.0)
+    np.testing.assert_array_equal(out, joints)
 
 
 def test_prior_bone_lengths_follow_the_ratios():
@@ -440,9 +488,9 @@ def _random_case(rendered, seed):
 @pytest.mark.parametrize("seed", range(24))
 def test_fast_fit_matches_the_original_bit_for_bit(rendered, seed):
     points, labels, options = _random_case(rendered, seed)
-    _assert_same(
-        fit_skeleton(points, labels, **options), _ref_fit_skeleton(points, labels, **options)
-    )
+    # The reference is the fit before the trunk anchors the shoulders (tested apart).
+    fast = fit_skeleton(points, labels, shoulder_anchor=0.0, **options)
+    _assert_same(fast, _ref_fit_skeleton(points, labels, **options))
     rows, cols = options["edges"]
     centres, counts = part_boundaries(points, labels, rows, cols)
     _assert_same((centres, counts), _ref_part_boundaries(points, labels, rows, cols))
@@ -476,7 +524,8 @@ def test_fast_fit_matches_the_original_on_random_clouds():
         kwargs = {"bone_lengths": bones, "edges": (rows, cols), "prediction": prediction}
         kwargs["smoothing"] = 0.3
         _assert_same(
-            fit_skeleton(points, labels, **kwargs), _ref_fit_skeleton(points, labels, **kwargs)
+            fit_skeleton(points, labels, shoulder_anchor=0.0, **kwargs),
+            _ref_fit_skeleton(points, labels, **kwargs),
         )
         _assert_same(part_axes(points, labels), _ref_part_axes(points, labels))
         centres, counts = part_boundaries(points, labels, rows, cols)

@@ -126,6 +126,7 @@ SEGMENT_RATIOS = MappingProxyType(
         "hip_width": 0.191,
         "hip_height": 0.530,
         "shoulder_height": 0.818,
+        "neck_above_shoulders": 0.02,
         "head_height": 0.130,
     }
 )

@@ -102,7 +102,7 @@ def prior_part_lengths(height: float) -> np.ndarray:
     """Length of each of the 15 parts (metres) from SEGMENT_RATIOS."""
     r = SEGMENT_RATIOS
     h = float(height)
-    neck_y = (r["shoulder_height"] + 0.02) * h
+    neck_y = (r["shoulder_height"] + r["neck_above_shoulders"]) * h
     return h * np.array(
         [
             r["head_height"],
@@ -401,6 +401,41 @@ def _place_limbs(
         conf[j] = 0.3 * max(conf[a], 0.5)
 
 
+def _anchor_shoulders(
+    joints: np.ndarray, *, bone_lengths: np.ndarray, height: float, weight: float
+) -> None:
+    """Pull each shoulder towards where the trunk puts it, carrying its arm along; in place.
+
+    The shoulder a limb chain places (elbow minus the upper arm's measured direction)
+    follows every mislabelled point of an arm that is often half hidden; the trunk
+    fixes it better: beside the neck across the hips' line, at the calibrated bone
+    length, ``neck_above_shoulders`` of stature below the neck (the T-pose's geometry).
+    Each shoulder moves ``weight`` of the way there; its elbow then keeps its
+    direction from the new shoulder at the upper arm's length, and the hand moves
+    with the elbow (the forearm keeps its direction and length).
+    """
+    neck = joints[_J["neck"]]
+    right_hip, left_hip = joints[_J["right_hip"]], joints[_J["left_hip"]]
+    up = _unit(neck - 0.5 * (right_hip + left_hip))
+    across = right_hip - left_hip
+    rightwards = _unit(across - (across @ up) * up)
+    if not (_finite(up) and _finite(rightwards)):
+        return
+    for side, sign in (("right", 1.0), ("left", -1.0)):
+        shoulder, elbow, hand = (_J[f"{side}_{j}"] for j in ("shoulder", "elbow", "hand"))
+        if not (_finite(joints[shoulder]) and _finite(joints[elbow])):
+            continue
+        length = bone_lengths[shoulder]
+        drop = min(SEGMENT_RATIOS["neck_above_shoulders"] * height, 0.9 * length)
+        on_trunk = neck + sign * math.sqrt(length**2 - drop**2) * rightwards - drop * up
+        moved = (1.0 - weight) * joints[shoulder] + weight * on_trunk
+        new_elbow = moved + bone_lengths[elbow] * _unit(joints[elbow] - moved)
+        if not _finite(new_elbow):
+            continue
+        joints[hand] += new_elbow - joints[elbow]
+        joints[shoulder], joints[elbow] = moved, new_elbow
+
+
 def fit_skeleton(
     points: np.ndarray,
     labels: np.ndarray,
@@ -414,6 +449,7 @@ def fit_skeleton(
     min_part_points: int = 4,
     min_elongation: float = 3.0,
     smoothing: float = 0.0,
+    shoulder_anchor: float = 0.3,
 ) -> SkeletonFit:
     """Fit the 15-joint skeleton to labelled points with calibrated bone lengths.
 
@@ -421,7 +457,8 @@ def fit_skeleton(
     hips) come from part boundaries (:func:`ring_joints`). Each limb bone starts at
     its elbow or knee and follows a direction that mixes the part's principal axis
     (oriented towards its mode) and the direction to the ring joint at its other
-    end (:data:`LIMB_DIRECTION_WEIGHTS`), for exactly its calibrated length.
+    end (:data:`LIMB_DIRECTION_WEIGHTS`), for exactly its calibrated length. The
+    shoulders are then pulled towards where the trunk puts them (``shoulder_anchor``).
 
     Parameters
     ----------
@@ -449,6 +486,9 @@ def fit_skeleton(
         Smallest ``lambda1 / lambda2`` for a part's principal axis to be trusted.
     smoothing : float
         Weight of the prediction in each measured joint, in [0, 1).
+    shoulder_anchor : float
+        How far each shoulder is pulled, in [0, 1], from where its arm puts it
+        towards where the trunk puts it (the arm follows; :func:`_anchor_shoulders`).
 
     Returns
     -------
@@ -513,6 +553,10 @@ def fit_skeleton(
         min_part_points=min_part_points,
         min_elongation=min_elongation,
     )
+    if shoulder_anchor > 0:
+        _anchor_shoulders(
+            joints, bone_lengths=bone_lengths, height=height, weight=shoulder_anchor
+        )
 
     # Head: from the neck towards the head's mode.
     ih, ineck = _J["head"], _J["neck"]
