@@ -554,9 +554,7 @@ def fit_skeleton(
         min_elongation=min_elongation,
     )
     if shoulder_anchor > 0:
-        _anchor_shoulders(
-            joints, bone_lengths=bone_lengths, height=height, weight=shoulder_anchor
-        )
+        _anchor_shoulders(joints, bone_lengths=bone_lengths, height=height, weight=shoulder_anchor)
 
     # Head: from the neck towards the head's mode.
     ih, ineck = _J["head"], _J["neck"]
