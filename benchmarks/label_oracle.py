@@ -101,6 +101,7 @@ def true_label_angles(sequence, calibration, n_points: int = 400) -> np.ndarray:
             edges=(graph.rows, graph.cols),
             modes=part_modes(points, labels, bandwidth=0.06),
             height=calibration.height,
+            shoulder_offset=calibration.shoulders,
         )
         out[t] = joint_angles(fit.joints)
     return out

@@ -25,24 +25,24 @@ _J = JOINT_INDEX
 # to pelvis centre). Fitted by `python scripts/fit_kinect_convention.py` on the
 # development UTD-MHAD sequences (subjects 1-4, trial 1, 108 sequences) from the
 # default PoseTracker's output. Cross-validated by subject (fit on two, scored on the
-# other two): mAP@10cm 0.58-0.59 -> 0.86, MPJPE 95-99 -> 61-64 mm.
+# other two): mAP@10cm 0.58-0.61 -> 0.86, MPJPE 93-98 -> 61-64 mm.
 _KINECT_OFFSETS = np.array(
     [
         [-0.031, 0.017, -0.017],  # head
-        [-0.029, -0.058, -0.002],  # neck
-        [0.018, -0.148, 0.001],  # right_shoulder
-        [-0.077, -0.193, 0.004],  # left_shoulder
-        [-0.018, -0.171, 0.021],  # right_elbow
-        [-0.056, -0.221, 0.009],  # left_elbow
-        [-0.009, -0.169, 0.050],  # right_hand
-        [-0.059, -0.222, 0.052],  # left_hand
-        [-0.030, 0.017, 0.023],  # torso
-        [0.076, 0.075, 0.039],  # right_hip
-        [-0.138, 0.117, 0.055],  # left_hip
+        [-0.028, -0.059, -0.002],  # neck
+        [0.005, -0.138, 0.001],  # right_shoulder
+        [-0.063, -0.177, 0.004],  # left_shoulder
+        [-0.018, -0.169, 0.021],  # right_elbow
+        [-0.057, -0.217, 0.009],  # left_elbow
+        [-0.009, -0.167, 0.051],  # right_hand
+        [-0.061, -0.215, 0.052],  # left_hand
+        [-0.030, 0.016, 0.023],  # torso
+        [0.075, 0.075, 0.040],  # right_hip
+        [-0.137, 0.117, 0.055],  # left_hip
         [0.007, -0.020, -0.057],  # right_knee
         [-0.069, 0.059, -0.026],  # left_knee
-        [0.030, 0.013, 0.022],  # right_foot
-        [-0.065, 0.069, 0.020],  # left_foot
+        [0.029, 0.013, 0.022],  # right_foot
+        [-0.064, 0.069, 0.020],  # left_foot
     ]
 )
 _KINECT_OFFSETS.setflags(write=False)

@@ -401,33 +401,65 @@ def _place_limbs(
         conf[j] = 0.3 * max(conf[a], 0.5)
 
 
+def _trunk_axes(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The trunk's ``up`` (pelvis centre to neck) and ``rightwards`` (across the hips) units."""
+    right_hip, left_hip = joints[_J["right_hip"]], joints[_J["left_hip"]]
+    up = _unit(joints[_J["neck"]] - 0.5 * (right_hip + left_hip))
+    across = right_hip - left_hip
+    return up, _unit(across - (across @ up) * up)
+
+
+def shoulder_offset(joints: np.ndarray) -> np.ndarray:
+    """Where a skeleton's shoulders sit from its neck: ``(across, below)`` in metres.
+
+    ``across`` along the hips' line and ``below`` down the trunk's axis, the two
+    sides averaged; NaN where the trunk or a shoulder is unknown. The offset
+    :func:`fit_skeleton` anchors the shoulders to (``shoulder_offset=``).
+    """
+    joints = np.asarray(joints, dtype=float)
+    up, rightwards = _trunk_axes(joints)
+    out = np.zeros(2)
+    for side, sign in (("right", 1.0), ("left", -1.0)):
+        d = joints[_J[f"{side}_shoulder"]] - joints[_J["neck"]]
+        out += 0.5 * np.array([sign * (d @ rightwards), -(d @ up)])
+    return out
+
+
 def _anchor_shoulders(
-    joints: np.ndarray, *, bone_lengths: np.ndarray, height: float, weight: float
+    joints: np.ndarray,
+    *,
+    bone_lengths: np.ndarray,
+    height: float,
+    weight: float,
+    offset: np.ndarray | None = None,
 ) -> None:
     """Pull each shoulder towards where the trunk puts it, carrying its arm along; in place.
 
     The shoulder a limb chain places (elbow minus the upper arm's measured direction)
     follows every mislabelled point of an arm that is often half hidden; the trunk
-    fixes it better: beside the neck across the hips' line, at the calibrated bone
-    length, ``neck_above_shoulders`` of stature below the neck (the T-pose's geometry).
-    Each shoulder moves ``weight`` of the way there; its elbow then keeps its
-    direction from the new shoulder at the upper arm's length, and the hand moves
-    with the elbow (the forearm keeps its direction and length).
+    fixes it better: beside the neck across the hips' line, ``offset`` (``(across,
+    below)`` metres, as :func:`shoulder_offset` measures it) from the neck, by
+    default the T-pose's geometry (the calibrated bone length,
+    ``neck_above_shoulders`` of stature below the neck). Each shoulder moves
+    ``weight`` of the way there; its elbow then keeps its direction from the new
+    shoulder at the upper arm's length, and the hand moves with the elbow (the
+    forearm keeps its direction and length).
     """
-    neck = joints[_J["neck"]]
-    right_hip, left_hip = joints[_J["right_hip"]], joints[_J["left_hip"]]
-    up = _unit(neck - 0.5 * (right_hip + left_hip))
-    across = right_hip - left_hip
-    rightwards = _unit(across - (across @ up) * up)
+    up, rightwards = _trunk_axes(joints)
     if not (_finite(up) and _finite(rightwards)):
         return
+    neck = joints[_J["neck"]]
     for side, sign in (("right", 1.0), ("left", -1.0)):
         shoulder, elbow, hand = (_J[f"{side}_{j}"] for j in ("shoulder", "elbow", "hand"))
         if not (_finite(joints[shoulder]) and _finite(joints[elbow])):
             continue
-        length = bone_lengths[shoulder]
-        drop = min(SEGMENT_RATIOS["neck_above_shoulders"] * height, 0.9 * length)
-        on_trunk = neck + sign * math.sqrt(length**2 - drop**2) * rightwards - drop * up
+        if offset is None:
+            length = bone_lengths[shoulder]
+            below = min(SEGMENT_RATIOS["neck_above_shoulders"] * height, 0.9 * length)
+            across = math.sqrt(length**2 - below**2)
+        else:
+            across, below = offset
+        on_trunk = neck + sign * across * rightwards - below * up
         moved = (1.0 - weight) * joints[shoulder] + weight * on_trunk
         new_elbow = moved + bone_lengths[elbow] * _unit(joints[elbow] - moved)
         if not _finite(new_elbow):
@@ -450,6 +482,7 @@ def fit_skeleton(
     min_elongation: float = 3.0,
     smoothing: float = 0.0,
     shoulder_anchor: float = 0.3,
+    shoulder_offset: np.ndarray | None = None,
 ) -> SkeletonFit:
     """Fit the 15-joint skeleton to labelled points with calibrated bone lengths.
 
@@ -489,6 +522,10 @@ def fit_skeleton(
     shoulder_anchor : float
         How far each shoulder is pulled, in [0, 1], from where its arm puts it
         towards where the trunk puts it (the arm follows; :func:`_anchor_shoulders`).
+    shoulder_offset : (2,) float, optional
+        Where the trunk puts the shoulders: ``(across, below)`` the neck in metres
+        (:func:`shoulder_offset` of a calibration skeleton); the T-pose's geometry
+        where not given.
 
     Returns
     -------
@@ -554,7 +591,13 @@ def fit_skeleton(
         min_elongation=min_elongation,
     )
     if shoulder_anchor > 0:
-        _anchor_shoulders(joints, bone_lengths=bone_lengths, height=height, weight=shoulder_anchor)
+        _anchor_shoulders(
+            joints,
+            bone_lengths=bone_lengths,
+            height=height,
+            weight=shoulder_anchor,
+            offset=shoulder_offset,
+        )
 
     # Head: from the neck towards the head's mode.
     ih, ineck = _J["head"], _J["neck"]

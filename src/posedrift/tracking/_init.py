@@ -19,6 +19,7 @@ from posedrift.skeleton._fit import (
     prior_bone_lengths,
     prior_part_lengths,
     ring_joints,
+    shoulder_offset,
 )
 
 _J = JOINT_INDEX
@@ -40,12 +41,33 @@ class Calibration:
         fraction of H.
     up : (3,) float
         The person's upward direction in the camera frame at initialization.
+    shoulders : (2,) float or None
+        Where the shoulders sit from the neck, ``(across, below)`` in metres
+        (:func:`measure_shoulders`); None for the T-pose's geometry.
     """
 
     height: float
     bone_lengths: np.ndarray
     reach: np.ndarray
     up: np.ndarray
+    shoulders: np.ndarray | None = None
+
+
+# Plausible shoulder offsets from the neck, as fractions of stature: (across, below).
+_SHOULDER_RANGE = ((0.07, 0.17), (-0.01, 0.06))
+
+
+def measure_shoulders(joints: np.ndarray, height: float) -> np.ndarray | None:
+    """The person's shoulder offset from the neck (``shoulder_offset``) at initialization.
+
+    Measured on a skeleton fitted without anchoring the shoulders (the arms place
+    them); None where it is unknown or implausible (outside ``_SHOULDER_RANGE``).
+    """
+    offset = shoulder_offset(joints)
+    for value, (low, high) in zip(offset, _SHOULDER_RANGE, strict=True):
+        if not low * height <= value <= high * height:  # also False for NaN
+            return None
+    return offset
 
 
 def prior_reach(height: float) -> np.ndarray:

@@ -35,6 +35,7 @@ from posedrift.tracking._init import (
     geometric_labels,
     label_template_points,
     measure_reach,
+    measure_shoulders,
     smooth_labels,
 )
 from posedrift.tracking._result import FrameResult, FrameStatus
@@ -679,8 +680,12 @@ class PoseTracker:
         finally:
             self._calibration = saved
 
-    def _fit(self, points, labels, graph, prediction, *, sigma=None) -> _Attempt:
+    def _fit(
+        self, points, labels, graph, prediction, *, sigma=None, anchor_shoulders=True
+    ) -> _Attempt:
         cal = self._calibration
+        # Without anchoring, the shoulders are where the arms put them (calibration).
+        unanchored = {} if anchor_shoulders else {"shoulder_anchor": 0.0}
         modes = part_modes(points, labels, bandwidth=0.06)
         fit = fit_skeleton(
             points,
@@ -691,6 +696,8 @@ class PoseTracker:
             prediction=prediction,
             height=cal.height,
             smoothing=self.temporal_smoothing,
+            shoulder_offset=cal.shoulders,
+            **unanchored,
         )
         health = assess(
             points,
@@ -782,6 +789,10 @@ class PoseTracker:
         guess = None
         if self._last_joints is not None:
             guess = self._last_joints + (points.mean(axis=0) - self._last_centre)
+        if fresh_calibration:  # Where this person's arms put their shoulders.
+            bare = self._fit(points, labels, graph, guess, anchor_shoulders=False)
+            shoulders = measure_shoulders(bare.fit.joints, self._calibration.height)
+            self._calibration = replace(self._calibration, shoulders=shoulders)
         attempt = self._fit(points, labels, graph, guess)
         if fresh_calibration and not attempt.health.ok:
             # Keep no calibration from a frame that could not be fitted.
