@@ -90,6 +90,32 @@ def test_limb_bones_keep_their_calibrated_lengths(sequence):
         np.testing.assert_allclose(lengths, calibrated[i], atol=1e-6)  # metres
 
 
+def test_calibration_measures_where_the_shoulders_sit(sequence):
+    """From the T-pose: the shoulders' spread within 2 cm of the truth, a drop below the neck."""
+    from posedrift.skeleton._fit import shoulder_offset
+
+    tracker = PoseTracker(K, forest=LabelImages(sequence))
+    tracker.process(sequence.frames[0])
+    across, below = tracker.calibration.shoulders
+    true_across, _ = shoulder_offset(sequence.reference.joints[0])
+    assert abs(across - true_across) < 0.02  # metres
+    # The drop depends on where a skeleton puts its neck (rigs differ); a plausible one.
+    assert 0.0 < below < 0.06 * tracker.calibration.height
+
+
+def test_implausible_shoulders_fall_back_on_the_t_pose():
+    from posedrift.skeleton import JOINT_INDEX, t_pose_joints
+    from posedrift.tracking._init import measure_shoulders
+
+    joints = t_pose_joints(1.75) + [0.0, 0.0, 2.5]
+    np.testing.assert_allclose(measure_shoulders(joints, 1.75), [0.5 * 0.259 * 1.75, 0.035])
+    shrugged = joints.copy()  # both shoulders 15 cm above the neck
+    shrugged[[JOINT_INDEX["right_shoulder"], JOINT_INDEX["left_shoulder"]], 1] += 0.185
+    assert measure_shoulders(shrugged, 1.75) is None
+    joints[JOINT_INDEX["left_hip"]] = np.nan  # no trunk
+    assert measure_shoulders(joints, 1.75) is None
+
+
 def test_depth_in_millimetres_as_metres_gets_a_units_hint(sequence):
     frame = sequence.frames[5]
     wrong = DepthFrame(frame.depth * 1000.0, frame.intrinsics, index=5)  # mm as metres
