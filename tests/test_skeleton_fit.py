@@ -25,7 +25,7 @@ from posedrift.skeleton._fit import (
     part_boundaries,
     prior_bone_lengths,
     ring_joints,
-    shoulder_offset,
+    shoulder_offset_of,
 )
 
 J = JOINT_INDEX
@@ -169,7 +169,7 @@ def test_anchored_shoulders_move_towards_the_trunk_and_carry_the_arm(weight):
 
 
 def test_shoulder_offset_of_a_t_pose_is_its_geometry():
-    across, below = shoulder_offset(_posed_t_pose(1.6))
+    across, below = shoulder_offset_of(_posed_t_pose(1.6))
     assert abs(across - 0.5 * SEGMENT_RATIOS["shoulder_width"] * 1.6) < 1e-12
     assert abs(below - SEGMENT_RATIOS["neck_above_shoulders"] * 1.6) < 1e-12
 
@@ -180,13 +180,13 @@ def test_anchored_shoulders_go_to_a_given_offset():
     out = joints.copy()
     # The offset measured on the same skeleton: nothing moves.
     _anchor_shoulders(
-        out, bone_lengths=bones, height=1.75, weight=1.0, offset=shoulder_offset(joints)
+        out, bone_lengths=bones, height=1.75, weight=1.0, offset=shoulder_offset_of(joints)
     )
     np.testing.assert_allclose(out, joints, atol=1e-12)
     # Another person's: 4 cm lower and 2 cm narrower, and so they end.
-    wanted = shoulder_offset(joints) + [-0.02, 0.04]
+    wanted = shoulder_offset_of(joints) + [-0.02, 0.04]
     _anchor_shoulders(out, bone_lengths=bones, height=1.75, weight=1.0, offset=wanted)
-    np.testing.assert_allclose(shoulder_offset(out), wanted, atol=1e-12)
+    np.testing.assert_allclose(shoulder_offset_of(out), wanted, atol=1e-12)
 
 
 def test_anchored_shoulders_need_the_trunk():

@@ -92,12 +92,12 @@ def test_limb_bones_keep_their_calibrated_lengths(sequence):
 
 def test_calibration_measures_where_the_shoulders_sit(sequence):
     """From the T-pose: the shoulders' spread within 2 cm of the truth, a drop below the neck."""
-    from posedrift.skeleton._fit import shoulder_offset
+    from posedrift.skeleton._fit import shoulder_offset_of
 
     tracker = PoseTracker(K, forest=LabelImages(sequence))
     tracker.process(sequence.frames[0])
     across, below = tracker.calibration.shoulders
-    true_across, _ = shoulder_offset(sequence.reference.joints[0])
+    true_across, _ = shoulder_offset_of(sequence.reference.joints[0])
     assert abs(across - true_across) < 0.02  # metres
     # The drop depends on where a skeleton puts its neck (rigs differ); a plausible one.
     assert 0.0 < below < 0.06 * tracker.calibration.height

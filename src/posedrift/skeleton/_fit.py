@@ -409,7 +409,7 @@ def _trunk_axes(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return up, _unit(across - (across @ up) * up)
 
 
-def shoulder_offset(joints: np.ndarray) -> np.ndarray:
+def shoulder_offset_of(joints: np.ndarray) -> np.ndarray:
     """Where a skeleton's shoulders sit from its neck: ``(across, below)`` in metres.
 
     ``across`` along the hips' line and ``below`` down the trunk's axis, the two
@@ -438,7 +438,7 @@ def _anchor_shoulders(
     The shoulder a limb chain places (elbow minus the upper arm's measured direction)
     follows every mislabelled point of an arm that is often half hidden; the trunk
     fixes it better: beside the neck across the hips' line, ``offset`` (``(across,
-    below)`` metres, as :func:`shoulder_offset` measures it) from the neck, by
+    below)`` metres, as :func:`shoulder_offset_of` measures it) from the neck, by
     default the T-pose's geometry (the calibrated bone length,
     ``neck_above_shoulders`` of stature below the neck). Each shoulder moves
     ``weight`` of the way there; its elbow then keeps its direction from the new
@@ -524,7 +524,7 @@ def fit_skeleton(
         towards where the trunk puts it (the arm follows; :func:`_anchor_shoulders`).
     shoulder_offset : (2,) float, optional
         Where the trunk puts the shoulders: ``(across, below)`` the neck in metres
-        (:func:`shoulder_offset` of a calibration skeleton); the T-pose's geometry
+        (:func:`shoulder_offset_of` a calibration skeleton); the T-pose's geometry
         where not given.
 
     Returns

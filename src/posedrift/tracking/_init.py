@@ -19,7 +19,7 @@ from posedrift.skeleton._fit import (
     prior_bone_lengths,
     prior_part_lengths,
     ring_joints,
-    shoulder_offset,
+    shoulder_offset_of,
 )
 
 _J = JOINT_INDEX
@@ -58,12 +58,12 @@ _SHOULDER_RANGE = ((0.07, 0.17), (-0.01, 0.06))
 
 
 def measure_shoulders(joints: np.ndarray, height: float) -> np.ndarray | None:
-    """The person's shoulder offset from the neck (``shoulder_offset``) at initialization.
+    """The person's shoulder offset from the neck (:func:`shoulder_offset_of`) at initialization.
 
     Measured on a skeleton fitted without anchoring the shoulders (the arms place
     them); None where it is unknown or implausible (outside ``_SHOULDER_RANGE``).
     """
-    offset = shoulder_offset(joints)
+    offset = shoulder_offset_of(joints)
     for value, (low, high) in zip(offset, _SHOULDER_RANGE, strict=True):
         if not low * height <= value <= high * height:  # also False for NaN
             return None
