@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Reproduce the tables of docs/RESULTS.md (about 25 minutes on 2 cores).
+# Reproduce the tables of docs/RESULTS.md (about 45 minutes, one core at a time).
 # Usage: bash benchmarks/results.sh [OUT_DIR]   (needs ../shared/data or $POSEDRIFT_DATA)
 set -euo pipefail
 here="$(cd "$(dirname "$0")/.." && pwd)"
@@ -55,6 +55,26 @@ posedrift -q eval synthetic builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" "$M/
     "$M/cmu/001_08.bvh" "$M/cmu-original-skeleton/131_03.bvh" "$M/cmu/007_03.bvh" \
     "$M/cmu/007_05.bvh" --frames 500 --there-and-back --methods cpd,shotton,icp \
     --json "$out/there_and_back.json" | tee "$out/there_and_back.md"
+# The tracker against ICP-style tracking over five point samples each (seeds 0-4), on the
+# development and held-out clips, with noise, in a room, a tall body, too near, and on the
+# UTD-MHAD trials of the Table 1 runs below.
+repeat() { name=$1; shift; posedrift -q eval synthetic "$@" --methods cpd,icp --repeats 5 \
+    --no-paper --json "$out/repeats_$name.json" | tee "$out/repeats_$name.md"; }
+repeat dev builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" "$M/cmu/002_10.bvh" \
+    "$M/cmu/001_08.bvh" --frames 500
+repeat heldout "$M/cmu-original-skeleton/131_03.bvh" "$M/cmu/007_03.bvh" "$M/cmu/007_05.bvh" \
+    "$M/cmu/007_08.bvh" --frames 500
+repeat noise builtin "$M/cmu/002_07.bvh" --frames 500 --noise
+repeat room builtin "$M/cmu/002_07.bvh" --frames 500 --noise --room
+repeat tall "$M/cmu-original-skeleton/131_03.bvh" "$M/cmu/007_03.bvh" "$M/cmu/007_05.bvh" \
+    "$M/cmu/007_08.bvh" --frames 500 --height 1.95 --girth 0.9
+repeat near builtin "$M/cmu/007_03.bvh" "$M/cmu/007_05.bvh" "$M/cmu/002_07.bvh" --frames 300 \
+    --distance 1.6
+utd_repeat() { posedrift -q eval utd "$data/utd-mhad" --sequences "${2%,}" --methods cpd,icp \
+    --repeats 5 --json "$out/repeats_$1.json" | tee "$out/repeats_$1.md"; }
+utd_repeat utd1 "$(for a in $(seq 1 27); do printf "a%d_s%d_t1," "$a" $(( a % 4 + 1 )); done)"
+utd_repeat utd2 "$(for a in $(seq 1 27); do for s in 1 2 3 4; do printf "a%d_s%d_t2," "$a" "$s"
+    done; done)"
 # How much of the error the labels cause: the tracker, with a perfect forest, true labels.
 python "$here/benchmarks/label_oracle.py" builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" \
     "$M/cmu/002_10.bvh" "$M/cmu/001_08.bvh" --frames 500 | tee "$out/label_oracle.md"

@@ -632,3 +632,88 @@ def test_eval_synthetic_in_a_room_with_another_camera(tmp_path, monkeypatch):
     ):
         result = CliRunner().invoke(app, [*args, *bad])
         assert result.exit_code == 2 and option in result.output
+
+
+# --- repeats: the trackers run with several point-sampling seeds ------------------------------
+
+
+class Shifted(Centroid):
+    """Test-only seeded method: the centroid T-pose moved ``rng`` centimetres to the right."""
+
+    def __init__(self, intrinsics, *, forest=None, rng=0):
+        super().__init__(intrinsics)
+        self.shift = 0.01 * rng
+
+    def process(self, frame):
+        result = super().process(frame)
+        return FrameResult(
+            frame.index, result.status, result.joints + [self.shift, 0, 0], result.confidence
+        )
+
+
+def _seeded(cls):
+    def factory(intrinsics, *, forest=None, rng=0):
+        return cls(intrinsics, forest=forest, rng=rng)
+
+    factory.seeded = True
+    return factory
+
+
+def test_repeats_average_the_seeded_methods_over_their_seeds():
+    seq = _toy_sequence()
+    methods = {"shifted": _seeded(Shifted), "centroid": Centroid}
+    report = evaluate([seq], methods, progress=False, forest=object(), repeats=3)
+    assert report["repeats"] == 3
+    # Each seed alone, as run_methods runs it: the mean row is their mean, number by number.
+    alone = [
+        harness.summarize(
+            harness.run_methods([seq], methods, progress=False, forest=object(), seed=k)
+        )
+        for k in range(3)
+    ]
+    row = report["methods"]["shifted"]
+    mpjpe = [a["methods"]["shifted"]["mpjpe_mm"] for a in alone]
+    assert len(set(mpjpe)) == 3  # each seed shifts the skeleton another centimetre
+    assert row["mpjpe_mm"] == pytest.approx(np.mean(mpjpe), abs=0.01)
+    assert row["repeats"]["seeds"] == [0, 1, 2]
+    # A shift moves no angle: the same error for every seed, no spread.
+    angles = [a["methods"]["shifted"]["angle_error_deg"]["mean"] for a in alone]
+    assert row["repeats"]["angle_error_mean_deg"] == pytest.approx(angles)
+    assert row["repeats"]["sd_deg"] == pytest.approx(0.0, abs=1e-9)
+    assert row["failed_frames"] == 0 and row["status_counts"]["tracked"] == 6
+    # The unseeded method runs once: its row is the first run's, without a repeats block.
+    once, first = report["methods"]["centroid"], alone[0]["methods"]["centroid"]
+    assert "repeats" not in once
+    assert {k: v for k, v in once.items() if k != "frames_per_second"} == {
+        k: v for k, v in first.items() if k != "frames_per_second"
+    }
+    single = evaluate([seq], methods, progress=False, forest=object())
+    assert "repeats" not in single and "repeats" not in single["methods"]["shifted"]
+    assert single["methods"]["shifted"]["mpjpe_mm"] == mpjpe[0]
+    with pytest.raises(ValueError, match="'repeats' parameter of evaluate"):
+        evaluate([seq], methods, progress=False, forest=object(), repeats=0)
+
+
+def test_repeats_reseed_the_tracker(tmp_path):
+    """The trackers' factories pass the seed on: other point samples, other errors."""
+    result = CliRunner().invoke(
+        app,
+        [
+            "eval", "synthetic", "builtin", "--frames", "12", "--methods", "cpd,shotton",
+            "--repeats", "2", "--json", str(tmp_path / "r.json"), "--no-paper",
+        ],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    report = json.loads((tmp_path / "r.json").read_text())
+    spread = report["methods"]["cpd"]["repeats"]
+    assert spread["seeds"] == [0, 1]
+    first, second = spread["angle_error_mean_deg"]
+    assert first != second
+    assert report["methods"]["cpd"]["angle_error_deg"]["mean"] == pytest.approx(
+        (first + second) / 2, abs=1e-3
+    )
+    assert "repeats" not in report["methods"]["shotton"]
+    cpd_row = next(line for line in result.output.splitlines() if line.startswith("| cpd"))
+    assert f"± {spread['sd_deg']:.2f}" in cpd_row
+    bad = CliRunner().invoke(app, ["eval", "synthetic", "builtin", "--repeats", "0"])
+    assert bad.exit_code == 2 and "--repeats" in bad.output

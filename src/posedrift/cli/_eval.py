@@ -16,6 +16,13 @@ _METHODS_HELP = (
 )
 
 
+_REPEATS_HELP = (
+    "Run the tracking methods (cpd, icp, the cpd ablations) N times with point-sampling "
+    "seeds 0 .. N-1 and report their means, with the spread of the mean angle error "
+    "(mean ± standard deviation); per-frame methods run once."
+)
+
+
 def _forest(model: Path | None):
     """The forest all methods share: loaded once here (None: the harness loads the default)."""
     if model is None:
@@ -133,6 +140,7 @@ def eval_synthetic(
     girth: Annotated[
         float, typer.Option("--girth", help="Body girth factor, > 0 (1 = the default body).")
     ] = 1.0,
+    repeats: Annotated[int, typer.Option("--repeats", min=1, help=_REPEATS_HELP)] = 1,
 ) -> None:
     """Render clips and evaluate every method on the same frames (the paper's Table 1).
 
@@ -211,6 +219,7 @@ def eval_synthetic(
             figures_dir=figures,
             protocol="synthetic",
             on_skip=unusable,
+            repeats=repeats,
         )
     except ValueError as exc:
         if str(exc).startswith("No sequence"):
@@ -312,6 +321,7 @@ def eval_utd(
             "or native (as recovered).",
         ),
     ] = "kinect",
+    repeats: Annotated[int, typer.Option("--repeats", min=1, help=_REPEATS_HELP)] = 1,
 ) -> None:
     """Evaluate every method on UTD-MHAD against the Kinect SDK skeleton.
 
@@ -396,6 +406,7 @@ def eval_utd(
             protocol="utd",
             convention=convention,
             on_skip=unusable,
+            repeats=repeats,
         )
     except ValueError as exc:
         if str(exc).startswith("No sequence"):

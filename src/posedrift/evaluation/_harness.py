@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from posedrift._validation import check_scalar
 from posedrift.camera import DepthFrame, Intrinsics, project
 from posedrift.evaluation._metrics import (
     angle_errors,
@@ -33,25 +34,35 @@ from posedrift.tracking import FrameResult, FrameStatus, PoseMethod
 logger = logging.getLogger(__name__)
 
 MethodFactory = Callable[..., PoseMethod]
-"""``factory(intrinsics, *, forest) -> PoseMethod``."""
+"""``factory(intrinsics, *, forest) -> PoseMethod``; a factory whose attribute
+``seeded`` is true also takes ``rng=`` (the seed of the method's random point
+sampling: :func:`run_methods`' ``seed``)."""
 
 
 def _tracker(**options: Any) -> MethodFactory:
-    def factory(intrinsics: Intrinsics, *, forest: Any = None) -> PoseMethod:
+    def factory(intrinsics: Intrinsics, *, forest: Any = None, rng: int = 0) -> PoseMethod:
         from posedrift.tracking import PoseTracker
 
-        return PoseTracker(intrinsics, forest=forest, **options)
+        return PoseTracker(intrinsics, forest=forest, rng=rng, **options)
 
+    factory.seeded = True  # type: ignore[attr-defined]
     return factory
 
 
-def _baseline(class_name: str) -> MethodFactory:
-    def factory(intrinsics: Intrinsics, *, forest: Any = None) -> PoseMethod:
+def _baseline(class_name: str, *, seeded: bool = False) -> MethodFactory:
+    def factory(intrinsics: Intrinsics, *, forest: Any = None, rng: int = 0) -> PoseMethod:
         import posedrift.baselines as baselines
 
-        return getattr(baselines, class_name)(intrinsics, forest=forest)
+        seed = {"rng": rng} if seeded else {}
+        return getattr(baselines, class_name)(intrinsics, forest=forest, **seed)
 
+    factory.seeded = seeded  # type: ignore[attr-defined]
     return factory
+
+
+def _is_seeded(factory: MethodFactory) -> bool:
+    """Whether a method samples at random (its factory takes ``rng``): worth repeating."""
+    return bool(getattr(factory, "seeded", False))
 
 
 METHODS: dict[str, tuple[str, MethodFactory]] = {
@@ -63,7 +74,7 @@ METHODS: dict[str, tuple[str, MethodFactory]] = {
     "pda": ("Dinh et al. 2014 per frame: principal directions of parts", _baseline("PDABaseline")),
     "icp": (
         "the tracking loop with nearest-neighbour (ICP) correspondences",
-        _baseline("ICPTracker"),
+        _baseline("ICPTracker", seeded=True),
     ),
     "cpd-paper": (
         "ablation: the paper's pure tracking, no per-frame forest evidence",
@@ -257,6 +268,7 @@ def run_methods(
     protocol: str | None = None,
     keep_frames: bool = False,
     on_skip: Callable[[str, str], None] | None = None,
+    seed: int = 0,
 ) -> EvaluationRun:
     """Run every method over every sequence, the same frames for all.
 
@@ -284,6 +296,9 @@ def run_methods(
     on_skip : callable, optional
         ``on_skip(name, reason)`` for each sequence left out; by default a
         ``RuntimeWarning`` naming it.
+    seed : int
+        Seed of the random point sampling of the methods that have one (the
+        trackers: factories marked ``seeded``); the others run as they are.
 
     Returns
     -------
@@ -294,10 +309,7 @@ def run_methods(
     ValueError
         If no sequence could be evaluated ("No sequence to evaluate...").
     """
-    if isinstance(methods, Mapping):
-        factories = dict(methods)
-    else:
-        factories = {name: METHODS[name][1] for name in parse_methods(methods)}
+    factories = _factories(methods)
     if forest is None:
         forest = _default_forest()
     total = None
@@ -319,7 +331,8 @@ def run_methods(
             labels = seq.reference.labels
             for name, factory in factories.items():
                 bar.update(task, description=f"{seq.name}: {name}")
-                method = factory(intrinsics, forest=forest)
+                seeded = {"rng": seed} if _is_seeded(factory) else {}
+                method = factory(intrinsics, forest=forest, **seeded)
                 run = MethodRun(method=name, sequence=seq.name, results=[], seconds=0.0)
                 observer = None
                 if keep_frames and name == "cpd":
@@ -378,6 +391,51 @@ def run_methods(
         forest=forest,
         skipped=skipped,
     )
+
+
+def _factories(methods: Sequence[str] | Mapping[str, MethodFactory]) -> dict[str, MethodFactory]:
+    """Method name -> factory, from names (:data:`METHODS`) or a mapping."""
+    if isinstance(methods, Mapping):
+        return dict(methods)
+    return {name: METHODS[name][1] for name in parse_methods(methods)}
+
+
+def mean_of_repeats(rows: Sequence[Mapping]) -> dict:
+    """One method's report rows from repeated runs (seeds 0, 1, ...) -> their mean row.
+
+    Every number is the mean over the runs (counts rounded to whole numbers; None
+    where any run has None), and ``"repeats"`` says how the mean angle error spread:
+    ``{"seeds": [...], "angle_error_mean_deg": [one per run], "sd_deg": sample
+    standard deviation}``.
+
+    Examples
+    --------
+    >>> runs = ((4.0, 1), (6.0, 2))
+    >>> rows = [{"angle_error_deg": {"mean": m}, "failed_frames": f} for m, f in runs]
+    >>> mean_of_repeats(rows)["angle_error_deg"], mean_of_repeats(rows)["failed_frames"]
+    ({'mean': 5.0}, 2)
+    >>> mean_of_repeats(rows)["repeats"]["sd_deg"]
+    1.4142
+    """
+    out = _mean_tree(list(rows))
+    means = [float(row["angle_error_deg"]["mean"]) for row in rows]
+    out["repeats"] = {
+        "seeds": list(range(len(rows))),
+        "angle_error_mean_deg": [_round(m) for m in means],
+        "sd_deg": _round(np.std(means, ddof=1)) if len(means) > 1 else 0.0,
+    }
+    return out
+
+
+def _mean_tree(values: list) -> Any:
+    """The mean of equally shaped JSON trees, leaf by leaf (see :func:`mean_of_repeats`)."""
+    first = values[0]
+    if isinstance(first, Mapping):
+        return {key: _mean_tree([v[key] for v in values]) for key in first}
+    if any(v is None for v in values) or isinstance(first, (bool, str, list)):
+        return None if any(v is None for v in values) else first
+    mean = float(np.mean(values))
+    return round(mean) if isinstance(first, int) else _round(mean)
 
 
 def _default_forest() -> Any:
@@ -528,6 +586,7 @@ def evaluate(
     protocol: str | None = None,
     convention: str = "native",
     on_skip: Callable[[str, str], None] | None = None,
+    repeats: int = 1,
 ) -> dict:
     """Evaluate methods on sequences: the JSON of ``posedrift eval`` (``METHOD.md`` section 6).
 
@@ -550,6 +609,13 @@ def evaluate(
     on_skip : callable, optional
         ``on_skip(name, reason)`` for each sequence that cannot be evaluated (see
         :func:`run_methods`); by default a ``RuntimeWarning``.
+    repeats : int
+        Run the methods that sample points at random (the trackers) this many
+        times, with seeds ``0 .. repeats - 1``: a tracker's errors vary from one
+        point sample to the next (the tracking loop amplifies small differences), and
+        comparisons need that spread. Their numbers are then the means over the runs,
+        with a ``"repeats"`` block (see :func:`mean_of_repeats`), and the report says
+        ``"repeats": n``; the other methods and the figures come from the first run.
 
     Returns
     -------
@@ -562,6 +628,11 @@ def evaluate(
         raise ValueError(
             f"Unknown joint convention {convention!r}: expected one of {sorted(CONVENTIONS)}."
         )
+    repeats = int(
+        check_scalar(repeats, "repeats", low=1, include_low=True, integer=True, caller="evaluate")
+    )
+    if repeats > 1 and not isinstance(sequences, Sequence):
+        sequences = list(sequences)  # walked once per repeat
     run = run_methods(
         sequences,
         methods,
@@ -572,6 +643,24 @@ def evaluate(
         on_skip=on_skip,
     )
     report = summarize(run, convention=convention)
+    seeded = {name: f for name, f in _factories(methods).items() if _is_seeded(f)}
+    if repeats > 1 and seeded:
+        rows = {name: [report["methods"][name]] for name in seeded}
+        for seed in range(1, repeats):
+            again = run_methods(
+                sequences,
+                seeded,
+                forest=run.forest,
+                progress=progress,
+                protocol=run.protocol,
+                on_skip=lambda name, reason: None,  # reported by the first run
+                seed=seed,
+            )
+            for name, row in summarize(again, convention=convention)["methods"].items():
+                rows[name].append(row)
+        for name, runs in rows.items():
+            report["methods"][name] = mean_of_repeats(runs)
+        report["repeats"] = repeats
     if figures_dir is not None:
         from posedrift.evaluation._figures import write_figures
 
@@ -589,6 +678,7 @@ __all__ = [
     "evaluate",
     "label_hits",
     "make_method",
+    "mean_of_repeats",
     "parse_methods",
     "run_methods",
     "summarize",

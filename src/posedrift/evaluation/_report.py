@@ -34,7 +34,8 @@ def markdown_table(report: Mapping, *, paper: bool = True) -> str:
 
     Rows are the methods; columns the eight mean absolute angle errors (degrees,
     the paper's order), their mean, then MPJPE (mm), mAP@10cm, frames per second
-    and failed frames.
+    and failed frames. A method run several times (``evaluate(repeats=)``) shows
+    its mean over the runs and their standard deviation (``mean ± sd``).
 
     Parameters
     ----------
@@ -72,7 +73,10 @@ def markdown_table(report: Mapping, *, paper: bool = True) -> str:
     for name, row in report["methods"].items():
         errors = row["angle_error_deg"]
         cells = [name] + [_fmt(errors.get(a)) for a in ANGLE_NAMES]
-        cells.append(f"**{_fmt(errors.get('mean'))}**")
+        mean = f"**{_fmt(errors.get('mean'))}**"
+        if "repeats" in row:  # the spread over the runs with other point samples
+            mean += f" ± {_fmt(row['repeats']['sd_deg'])}"
+        cells.append(mean)
         cells.append(_fmt(row.get("mpjpe_mm"), 1))
         cells.append(_fmt(row.get("map_10cm"), 3))
         cells.append(_fmt(row.get("frames_per_second"), 1))
