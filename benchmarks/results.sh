@@ -70,6 +70,7 @@ repeat tall "$M/cmu-original-skeleton/131_03.bvh" "$M/cmu/007_03.bvh" "$M/cmu/00
     "$M/cmu/007_08.bvh" --frames 500 --height 1.95 --girth 0.9
 repeat near builtin "$M/cmu/007_03.bvh" "$M/cmu/007_05.bvh" "$M/cmu/002_07.bvh" --frames 300 \
     --distance 1.6
+repeat drift builtin --frames 500
 utd_repeat() { posedrift -q eval utd "$data/utd-mhad" --sequences "${2%,}" --methods cpd,icp \
     --repeats 5 --json "$out/repeats_$1.json" | tee "$out/repeats_$1.md"; }
 utd_repeat utd1 "$(for a in $(seq 1 27); do printf "a%d_s%d_t1," "$a" $(( a % 4 + 1 )); done)"

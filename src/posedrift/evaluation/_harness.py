@@ -330,7 +330,8 @@ def run_methods(
             intrinsics = seq.frames[0].intrinsics
             labels = seq.reference.labels
             for name, factory in factories.items():
-                bar.update(task, description=f"{seq.name}: {name}")
+                run_name = f"{name}, seed {seed}" if seed else name
+                bar.update(task, description=f"{seq.name}: {run_name}")
                 seeded = {"rng": seed} if _is_seeded(factory) else {}
                 method = factory(intrinsics, forest=forest, **seeded)
                 run = MethodRun(method=name, sequence=seq.name, results=[], seconds=0.0)
