@@ -613,7 +613,7 @@ def evaluate(
     repeats : int
         Run the methods that sample points at random (the trackers) this many
         times, with seeds ``0 .. repeats - 1``: a tracker's errors vary from one
-        point sample to the next (the tracking loop amplifies small differences), and
+        point sample to the next (each frame starts from the last one's result), and
         comparisons need that spread. Their numbers are then the means over the runs,
         with a ``"repeats"`` block (see :func:`mean_of_repeats`), and the report says
         ``"repeats": n``; the other methods and the figures come from the first run.
