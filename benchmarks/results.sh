@@ -32,7 +32,7 @@ for d in 2.0 3.5; do
 done
 # Ablations of the tracker.
 posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 \
-    --methods cpd,cpd-paper,icp-paper,cpd-norelabel,cpd-rigid,cpd-cold,cpd-200,cpd-800 \
+    --methods cpd,cpd-paper,icp-paper,cpd-norelabel,cpd-novotes,cpd-rigid,cpd-cold,cpd-200,cpd-800 \
     --json "$out/ablations.json" --no-paper | tee "$out/ablations.md"
 # Drift (first / last 100 frames per sequence in the JSON), and the time of a full
 # 500-frame, four-method run.

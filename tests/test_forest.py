@@ -364,13 +364,22 @@ def test_cli_train_is_reproducible(tmp_path):
     empty = tmp_path / "no_clips"
     empty.mkdir()
     args = ["-q", "train", "--frames", "3", "--pixels", "200", "--offsets", "40"]
-    args += ["--depth", "8", "--mocap", str(empty), "--jobs", "1"]
+    args += ["--depth", "8", "--mocap", str(empty), "--jobs", "1", "--vote-frames", "4"]
     for name in ("a.npz", "b.npz"):
         result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / name)])
         assert result.exit_code == 0, result.output
     a, b = BodyPartForest.load(tmp_path / "a.npz"), BodyPartForest.load(tmp_path / "b.npz")
     np.testing.assert_array_equal(a.threshold, b.threshold)
     np.testing.assert_array_equal(a.offsets, b.offsets)
+    np.testing.assert_array_equal(a.votes.offset, b.votes.offset)
+    assert a.metadata["vote_frames"] == 4 and (a.votes.weight > 0).any()
+    # Without votes: the same trees (the votes draw from their own random stream).
+    result = CliRunner().invoke(
+        app, [*args, "--vote-frames", "0", "--out", str(tmp_path / "bare.npz")]
+    )
+    bare = BodyPartForest.load(tmp_path / "bare.npz")
+    assert bare.votes is None
+    np.testing.assert_array_equal(bare.threshold, a.threshold)
     assert a.metadata["procedural_share"] == 1.0 and a.metadata["seed"] == 0
     assert a.metadata["wide_share"] == 0.3 and a.metadata["wide_yaw"] == 100.0
     assert "no BVH clip to train on" in result.output

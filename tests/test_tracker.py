@@ -318,7 +318,7 @@ def test_appearance_weight_zero_is_the_pure_tracker(sequence):
     # The T-pose, then frames in motion (during the held T-pose both agree anyway).
     frames = [sequence.frames[0], *sequence.frames[30:44:2]]
     pure = _run(PoseTracker(K, forest=PredictOnly(forest)), frames)
-    zero = _run(PoseTracker(K, forest=forest, appearance_weight=0.0), frames)
+    zero = _run(PoseTracker(K, forest=forest, appearance_weight=0.0, vote_weights=(0, 0)), frames)
     fused = _run(PoseTracker(K, forest=forest), frames)
     for a, b in zip(pure, zero, strict=True):
         assert a.status is b.status

@@ -88,6 +88,23 @@ def train(
             "frames and weights the clips equally.",
         ),
     ] = 0.05,
+    vote_frames: Annotated[
+        int,
+        typer.Option(
+            "--vote-frames",
+            min=0,
+            help="Fresh frames (after the trees) from which each leaf learns where the "
+            "joints are (joint votes, used by the tracker); 0 for none.",
+        ),
+    ] = 20000,
+    vote_radius: Annotated[
+        float,
+        typer.Option(
+            "--vote-radius",
+            min=0.01,
+            help="A pixel votes only for joints within this many metres of it.",
+        ),
+    ] = 0.2,
 ) -> None:
     """Train a body-part forest on rendered synthetic depth frames (needs scikit-learn).
 
@@ -95,16 +112,20 @@ def train(
     dropped, --min-pose-distance) and the procedural motion, bodies of varied height,
     girth and build, views within 45 degrees of frontal at 2-3.5 m and (--wide-share
     of the frames) wider views up to --wide-yaw degrees from frontal at 1-4.5 m,
-    Kinect-like noise on half of the frames.
+    Kinect-like noise on half of the frames. Then, on --vote-frames fresh frames
+    drawn the same way, each leaf learns its pixels' offsets to the joints near
+    them (joint votes).
 
     Example: posedrift train --frames 2000 --seed 0 --out forest.npz
     """
     import time
+    from dataclasses import replace
 
     import numpy as np
 
     from posedrift.cli._outputs import check_output_file
     from posedrift.labelling import _train as tr
+    from posedrift.labelling import fit_joint_votes
 
     check_output_file(out, "--out")
     try:
@@ -124,8 +145,9 @@ def train(
             )
         with tr._progress(progress_enabled(), "loading motions", len(paths) + 1) as advance:
             motions = tr.load_training_motions(paths, on_motion=lambda _: advance())
-        render_rng, fit_rng = (
-            np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2)
+        # The votes' stream is a third child: the trees' two are as before votes.
+        render_rng, fit_rng, vote_rng = (
+            np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3)
         )
         n_clips = len(motions) - 1
         share = procedural_share if n_clips else 1.0
@@ -155,6 +177,8 @@ def train(
             "wide_yaw": wide_yaw,
             "mirror_share": mirror_share,
             "min_pose_distance": min_pose_distance,
+            "vote_frames": vote_frames,
+            "vote_radius": vote_radius,
         }
         with tr._progress(progress_enabled(), "rendering + features", frames) as advance:
             forest = tr.train_forest(
@@ -173,6 +197,30 @@ def train(
                 on_stage=lambda stage: typer.echo(f"fitting {trees} trees ...", err=True),
                 metadata=metadata,
             )
+        if vote_frames:
+            vote_started = time.perf_counter()
+            vote_source = tr.synthetic_training_frames(
+                vote_frames,
+                motions,
+                ranges=ranges,
+                weights=weights,
+                frames=pose_frames,
+                rng=vote_rng,
+            )
+            with tr._progress(progress_enabled(), "joint votes", vote_frames) as advance:
+                votes = fit_joint_votes(
+                    forest,
+                    vote_source,
+                    n_frames=vote_frames,
+                    radius=vote_radius,
+                    rng=vote_rng,
+                    on_frame=lambda _: advance(),
+                )
+            metadata = {
+                **forest.metadata,
+                "vote_seconds": round(time.perf_counter() - vote_started, 1),
+            }
+            forest = replace(forest.with_votes(votes), metadata=metadata)
     except ValueError as exc:
         raise fail(str(exc)) from exc
     path = forest.save(out)

@@ -78,13 +78,17 @@ METHODS: dict[str, tuple[str, MethodFactory]] = {
     ),
     "cpd-paper": (
         "ablation: the paper's pure tracking, no per-frame forest evidence",
-        _tracker(appearance_weight=0.0),
+        _tracker(appearance_weight=0.0, vote_weights=(0.0, 0.0)),
     ),
     "icp-paper": (
         "ablation: the pure tracking with ICP correspondences, no per-frame forest evidence",
-        _tracker(correspondence="icp", appearance_weight=0.0),
+        _tracker(correspondence="icp", appearance_weight=0.0, vote_weights=(0.0, 0.0)),
     ),
     "cpd-norelabel": ("ablation: no geodesic relabelling", _tracker(relabel=False)),
+    "cpd-novotes": (
+        "ablation: no joint votes (the skeleton from the labels alone)",
+        _tracker(vote_weights=(0.0, 0.0)),
+    ),
     "cpd-rigid": ("ablation: rigid instead of nonrigid CPD", _tracker(registration="rigid")),
     "cpd-cold": ("ablation: no warm start of CPD", _tracker(warm_start=False)),
     "cpd-200": ("ablation: 200 points", _tracker(n_points=200)),

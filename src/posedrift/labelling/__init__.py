@@ -2,11 +2,15 @@
 
 from posedrift.labelling._features import depth_features
 from posedrift.labelling._forest import BodyPartForest, PartPrediction
+from posedrift.labelling._votes import JointVotes, fit_joint_votes, joint_modes
 
 __all__: list[str] = [
     "BodyPartForest",
+    "JointVotes",
     "PartPrediction",
     "depth_features",
+    "fit_joint_votes",
+    "joint_modes",
 ]
 
 from posedrift.labelling._relabel import (

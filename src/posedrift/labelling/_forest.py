@@ -12,7 +12,7 @@ import io
 import json
 import zipfile
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from os import PathLike
 from pathlib import Path
@@ -29,6 +29,7 @@ from posedrift.labelling._features import (
     probe,
     probe_image,
 )
+from posedrift.labelling._votes import JointVotes
 from posedrift.skeleton import PART_NAMES
 
 try:  # the compiled kernels are optional: built by ``pip install -e .`` when a compiler exists
@@ -62,6 +63,8 @@ _KEYS = (
     "leaf",
     "leaf_values",
 )
+_VOTE_KEYS = ("vote_joint", "vote_offset", "vote_weight", "vote_radius")
+"""Optional arrays of a model with joint votes (:class:`JointVotes`)."""
 
 
 @dataclass(frozen=True)
@@ -108,6 +111,9 @@ class BodyPartForest:
         Depth (metres) read by background and off-image probes.
     metadata : mapping
         JSON-serialisable facts about training (seed, frames, ...); read-only.
+    votes : JointVotes, optional
+        Where each leaf's training pixels saw the joints (:meth:`with_votes`);
+        ``None`` for a model that only labels.
 
     Examples
     --------
@@ -127,6 +133,7 @@ class BodyPartForest:
     reference_focal: float = REFERENCE_FOCAL
     background: float = BACKGROUND_DEPTH
     metadata: Mapping[str, Any] = field(default_factory=dict)
+    votes: JointVotes | None = None
 
     def __post_init__(self) -> None:
         arrays = _validate_arrays(
@@ -153,6 +160,17 @@ class BodyPartForest:
         object.__setattr__(self, "reference_focal", float(self.reference_focal))
         object.__setattr__(self, "background", float(self.background))
         object.__setattr__(self, "metadata", MappingProxyType(dict(self.metadata)))
+        if self.votes is not None:
+            if not isinstance(self.votes, JointVotes):
+                raise ValueError(
+                    f"The 'votes' of BodyPartForest must be JointVotes or None. "
+                    f"Got {type(self.votes).__name__} instead."
+                )
+            if self.votes.n_leaves != len(self.leaf_values):
+                raise ValueError(
+                    f"The 'votes' of BodyPartForest must have one row per leaf "
+                    f"({len(self.leaf_values)}). Got {self.votes.n_leaves}."
+                )
 
     # ------------------------------------------------------------------ properties
     @property
@@ -265,7 +283,8 @@ class BodyPartForest:
     def save(self, path: str | PathLike) -> Path:
         """Write the model to ``path`` (a compressed ``.npz`` of plain arrays).
 
-        Leaf distributions are stored as float16; nothing is pickled.
+        Leaf distributions are stored as float16, joint votes quantized
+        (:meth:`_vote_arrays`); nothing is pickled.
         """
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -286,8 +305,28 @@ class BodyPartForest:
                 right=self.right,
                 leaf=self.leaf,
                 leaf_values=self.leaf_values.astype(np.float16),
+                **self._vote_arrays(),
             )
         return path
+
+    def _vote_arrays(self) -> dict[str, np.ndarray]:
+        """The votes as stored, or nothing: offsets as int8 steps of ``radius / 127``
+        (1.6 mm at 0.2 m; no offset component exceeds the radius) and weights as
+        uint8 steps of 1/255, which keeps the shipped model small."""
+        if self.votes is None:
+            return {}
+        votes = self.votes
+        step = votes.radius / 127.0
+        return {
+            "vote_joint": votes.joint,
+            "vote_offset": np.clip(np.rint(votes.offset / step), -127, 127).astype(np.int8),
+            "vote_weight": np.rint(votes.weight * 255.0).astype(np.uint8),
+            "vote_radius": np.array(votes.radius),
+        }
+
+    def with_votes(self, votes: JointVotes | None) -> BodyPartForest:
+        """The same trees with ``votes`` (:func:`~posedrift.labelling.fit_joint_votes`)."""
+        return replace(self, votes=votes)
 
     @classmethod
     def load(cls, path: str | PathLike) -> BodyPartForest:
@@ -350,6 +389,13 @@ class BodyPartForest:
                 if missing:
                     raise ValueError(f"{prefix} is not a posedrift forest: missing {missing}.")
                 arrays = {k: npz[k] for k in _KEYS}
+                stored = [k for k in _VOTE_KEYS if k in npz.files]
+                if stored and len(stored) != len(_VOTE_KEYS):
+                    raise ValueError(
+                        f"{prefix} has incomplete joint votes: "
+                        f"missing {sorted(set(_VOTE_KEYS) - set(stored))}."
+                    )
+                vote_arrays = {k: npz[k] for k in stored}
         except ValueError as exc:
             if str(exc).startswith(prefix):
                 raise
@@ -380,11 +426,28 @@ class BodyPartForest:
             )
         arrays["leaf_values"] = leaf_values.astype(np.float32)
         try:
+            votes = None
+            if vote_arrays:
+                kinds = {k: vote_arrays[k].dtype for k in _VOTE_KEYS}
+                if (kinds["vote_joint"], kinds["vote_offset"], kinds["vote_weight"]) != (
+                    np.int8,
+                    np.int8,
+                    np.uint8,
+                ) or kinds["vote_radius"].kind != "f":
+                    raise ValueError(f"its joint votes have unexpected dtypes {kinds}")
+                radius = float(vote_arrays["vote_radius"])
+                votes = JointVotes(
+                    joint=vote_arrays["vote_joint"],
+                    offset=vote_arrays["vote_offset"] * np.float32(radius / 127.0),
+                    weight=vote_arrays["vote_weight"] / np.float32(255.0),
+                    radius=radius,
+                )
             return cls(
                 **{k: arrays[k] for k in _KEYS[6:]},
                 reference_focal=scalars["reference_focal"],
                 background=scalars["background"],
                 metadata=metadata,
+                votes=votes,
             )
         except ValueError as exc:
             raise ValueError(f"{prefix} is invalid: {exc}") from exc
@@ -470,7 +533,8 @@ class BodyPartForest:
         intrinsics: Intrinsics,
         *,
         mask: np.ndarray | None = None,
-    ) -> np.ndarray:
+        return_leaves: bool = False,
+    ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """Part probabilities of only the given pixels (cheap per-point appearance).
 
         The probes read the same image as :meth:`predict` (background outside
@@ -486,11 +550,16 @@ class BodyPartForest:
         intrinsics : Intrinsics
         mask : (H, W) bool, optional
             The person's pixels; ``None`` takes every pixel with depth.
+        return_leaves : bool
+            Also return the leaf rows reached (for :attr:`votes`).
 
         Returns
         -------
         (N, 15) float32
             ``P(part | pixel)``; a uniform row for a pixel outside the foreground.
+        leaves : (T, N) int32
+            Only with ``return_leaves``: the row of ``leaf_values`` each pixel reached
+            in each tree; -1 for a pixel outside the foreground.
 
         Examples
         --------
@@ -542,13 +611,15 @@ class BodyPartForest:
             valid &= mask.astype(bool, copy=False)
         pixels = pixels.astype(np.intp, copy=False)
         out = np.full((len(pixels), self.n_parts), 1.0 / self.n_parts, dtype=np.float32)
+        leaves = np.full((self.n_trees, len(pixels)), -1, dtype=np.int32)
         inside = valid[pixels[:, 0], pixels[:, 1]] if len(pixels) else np.zeros(0, bool)
-        if not inside.any():
-            return out
-        image = probe_image(depth, valid, self.background)
-        terms = pixel_terms(depth, pixels[inside], intrinsics, self.reference_focal)
-        out[inside] = self._average_leaves(self._descend_frame(image, depth.shape, terms))
-        return out
+        if inside.any():
+            image = probe_image(depth, valid, self.background)
+            terms = pixel_terms(depth, pixels[inside], intrinsics, self.reference_focal)
+            reached = self._descend_frame(image, depth.shape, terms)
+            out[inside] = self._average_leaves(reached)
+            leaves[:, inside] = np.take(self.leaf, reached)
+        return (out, leaves) if return_leaves else out
 
     def _descend_frame(
         self, image: np.ndarray, shape: tuple[int, int], terms: tuple[np.ndarray, ...]

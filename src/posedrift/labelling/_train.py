@@ -36,11 +36,15 @@ class LabelledFrame:
     labels : (H, W) uint8
         Part index + 1, 0 for background.
     intrinsics : Intrinsics
+    joints : (15, 3) float, optional
+        The true joints in the camera frame (metres), where known: what
+        :func:`~posedrift.labelling.fit_joint_votes` learns from.
     """
 
     depth: np.ndarray
     labels: np.ndarray
     intrinsics: Intrinsics
+    joints: np.ndarray | None = None
 
     @property
     def mask(self) -> np.ndarray:
@@ -806,7 +810,9 @@ def render_training_frame(
     if noise:
         depth = kinect_noise(depth, rng=rng)
         labels = np.where(depth > 0, labels, 0).astype(np.uint8)
-    return LabelledFrame(depth=depth, labels=labels, intrinsics=intrinsics)
+    return LabelledFrame(
+        depth=depth, labels=labels, intrinsics=intrinsics, joints=camera.world_to_camera(joints)
+    )
 
 
 def synthetic_training_frames(

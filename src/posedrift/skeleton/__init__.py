@@ -49,6 +49,7 @@ from posedrift.skeleton._fit import (
     fit_skeleton,
     part_anchors,
     prior_bone_lengths,
+    refine_with_votes,
 )
 from posedrift.skeleton._meanshift import part_modes
 
@@ -59,4 +60,5 @@ __all__ += [
     "part_anchors",
     "part_modes",
     "prior_bone_lengths",
+    "refine_with_votes",
 ]

@@ -700,3 +700,85 @@ _BONE_ENDS = {"right_hand_tip": "right_hand_end", "left_hand_tip": "left_hand_en
 _BONE_ENDS.update({"right_toe": "right_foot_end", "left_toe": "left_foot_end"})
 _BONE_START = np.array([_BONE_ROW[a] for a, _ in PART_JOINTS])
 _BONE_END = np.array([_BONE_ROW[_BONE_ENDS.get(b, b)] for _, b in PART_JOINTS])
+
+
+# What the votes move: the upper trunk's joints directly, then each upper arm turns
+# towards its voted direction (the forearm keeps its own, the hand is carried along).
+# The legs keep the labels' skeleton: moving the hips and turning the thighs too made
+# the hip and knee angles worse (five point samples of eight clips; docs/RESULTS.md).
+_VOTED_TRUNK = np.array([_J[n] for n in ("neck", "right_shoulder", "left_shoulder")])
+_VOTED_ARMS = tuple(
+    (_J[f"{side}_shoulder"], _J[f"{side}_elbow"], _J[f"{side}_hand"]) for side in ("right", "left")
+)
+VOTED_JOINTS = (_J["head"], *(int(j) for j in _VOTED_TRUNK), _J["right_elbow"], _J["left_elbow"])
+"""The joints whose votes :func:`refine_with_votes` reads."""
+
+
+def refine_with_votes(
+    joints: np.ndarray,
+    voted: np.ndarray,
+    *,
+    trunk_weight: float = 0.5,
+    arm_weight: float = 0.4,
+) -> np.ndarray:
+    """Move a skeleton towards joints voted by the forest, keeping its arms' lengths.
+
+    The neck and shoulders move ``trunk_weight`` of the way to their voted
+    positions; ``torso`` stays the midpoint of neck and pelvis centre, and the
+    head follows the neck, its bone turned ``trunk_weight`` of the way towards the
+    voted one. Each upper arm then turns ``arm_weight`` of the way towards the
+    voted upper arm's direction, from its (moved) shoulder and at its own length;
+    the forearm keeps its direction and length. A joint without a vote (NaN in
+    ``voted``) is not moved, and a bone missing either voted end keeps its
+    direction. The legs are left as they are.
+
+    Parameters
+    ----------
+    joints : (15, 3) float
+        The skeleton (:func:`fit_skeleton`), metres.
+    voted : (15, 3) float
+        Voted joints (:func:`posedrift.labelling.joint_modes`); NaN rows for none.
+    trunk_weight, arm_weight : float
+        In [0, 1]; 0 and 0 return ``joints`` unchanged.
+
+    Returns
+    -------
+    (15, 3) float
+
+    Examples
+    --------
+    >>> from posedrift.skeleton import t_pose_joints
+    >>> pose = t_pose_joints(1.75)
+    >>> bool(np.allclose(refine_with_votes(pose, pose), pose))
+    True
+    """
+    joints = np.asarray(joints, dtype=float)
+    out = joints.copy()
+    voted = np.asarray(voted, dtype=float)
+    seen = np.isfinite(voted).all(axis=1)
+    trunk = _VOTED_TRUNK[seen[_VOTED_TRUNK] & np.isfinite(out[_VOTED_TRUNK]).all(axis=1)]
+    out[trunk] += trunk_weight * (voted[trunk] - out[trunk])
+    pelvis = 0.5 * (out[_J["right_hip"]] + out[_J["left_hip"]])
+    neck, head = _J["neck"], _J["head"]
+    if _finite(out[neck]) and _finite(pelvis):
+        out[_J["torso"]] = 0.5 * (out[neck] + pelvis)
+    _turn_bone(out, joints, voted, seen, neck, head, trunk_weight)
+    for shoulder, elbow, hand in _VOTED_ARMS:
+        old_elbow = out[elbow].copy()
+        _turn_bone(out, joints, voted, seen, shoulder, elbow, arm_weight)
+        out[hand] += out[elbow] - old_elbow
+    return out
+
+
+def _turn_bone(out, joints, voted, seen, parent: int, child: int, weight: float) -> None:
+    """Re-place ``out[child]`` from ``out[parent]``: the bone of ``joints``, its length
+    kept, turned ``weight`` of the way towards the voted bone's direction; in place."""
+    bone = joints[child] - joints[parent]
+    length = math.sqrt(bone.dot(bone))
+    direction = _unit(bone)
+    if not (_finite(direction) and _finite(out[parent])):
+        return
+    if seen[parent] and seen[child]:
+        turned = _unit((1.0 - weight) * direction + weight * _unit(voted[child] - voted[parent]))
+        direction = turned if _finite(turned) else direction
+    out[child] = out[parent] + length * direction

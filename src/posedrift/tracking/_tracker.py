@@ -26,7 +26,13 @@ from posedrift.camera import DepthFrame, Intrinsics, backproject, project
 from posedrift.labelling._relabel import geodesic_graph, relabel
 from posedrift.points._downsample import downsample
 from posedrift.points._segment import BackgroundModel, segment_person
-from posedrift.skeleton._fit import SkeletonFit, bone_anchors, fit_skeleton
+from posedrift.skeleton._fit import (
+    VOTED_JOINTS,
+    SkeletonFit,
+    bone_anchors,
+    fit_skeleton,
+    refine_with_votes,
+)
 from posedrift.skeleton._meanshift import part_modes
 from posedrift.tracking._health import Health, assess
 from posedrift.tracking._init import (
@@ -181,8 +187,9 @@ class PoseTracker:
         the tracked label evidence every frame (a product of experts, beyond the
         paper): ``evidence(part) ~ (P_cpd + f) (P_forest + appearance_floor)^w``,
         with ``P_cpd`` the labels carried over by registration and ``f`` = 0.02.
-        It stops labels drifting over long sequences. 0 gives the paper's pure
-        tracking (the forest then labels only the (re)initialization frames). Needs
+        It stops labels drifting over long sequences. 0, with ``vote_weights``
+        ``(0, 0)``, gives the paper's pure tracking (the forest then labels only
+        the (re)initialization frames). Needs
         a forest with ``predict_pixels``; ignored with ``forest="geometric"``.
     appearance_floor : float
         Floor added to the forest's probabilities before fusion (how far a
@@ -192,6 +199,15 @@ class PoseTracker:
         tracking, the previous skeleton moved by the registration's warp, so
         motion-compensated; when re-initializing, the last pose moved with the
         body). Steadies the joints against label noise; 0 fits every frame afresh.
+    vote_weights : (float, float)
+        ``(trunk, arm)`` weights of the forest's joint votes (beyond the paper;
+        Girshick et al. 2011): each point's leaves vote for where the joints are,
+        each joint is the mode of its votes nearest the fitted skeleton's joint,
+        and :func:`posedrift.skeleton.refine_with_votes` moves the head, neck and
+        shoulders and turns the upper arms that far towards them. ``(0, 0)``, or a
+        forest without votes, keeps the skeleton from the labels alone.
+    vote_bandwidth : float
+        Mean-shift kernel width of the votes (metres).
     rng : int or Generator
         Seeds downsampling and RANSAC (runs are repeatable for an int).
 
@@ -236,6 +252,8 @@ class PoseTracker:
         appearance_weight: float = 3.0,
         appearance_floor: float = 0.01,
         temporal_smoothing: float = 0.3,
+        vote_weights: tuple[float, float] = (0.5, 0.4),
+        vote_bandwidth: float = 0.05,
         rng: int | np.random.Generator | None = 0,
     ) -> None:
         caller = "PoseTracker"
@@ -300,6 +318,19 @@ class PoseTracker:
             include_low=True,
             caller=caller,
         )
+        if np.shape(vote_weights) != (2,):
+            raise ValueError(
+                f"The 'vote_weights' parameter of {caller} must be two weights (trunk, "
+                f"arm). Got {vote_weights!r} instead."
+            )
+        self.vote_weights = tuple(
+            check_scalar(
+                w, name, low=0.0, high=1.0, include_low=True, include_high=True, caller=caller
+            )
+            for w, name in zip(vote_weights, ("vote_weights[0]", "vote_weights[1]"), strict=True)
+        )
+        self.vote_bandwidth = check_scalar(vote_bandwidth, "vote_bandwidth", low=0.0, caller=caller)
+        self._frame_votes: tuple[np.ndarray, ...] | None = None
         self.relabel = bool(relabel)
         self.registration = registration
         self.correspondence = correspondence
@@ -422,10 +453,13 @@ class PoseTracker:
         status = FrameStatus.TRACKED
         attempt = None
         message = ""
-        if self._state is not None and self._calibration is not None:
-            t_app = time.perf_counter()
-            appearance = self._appearance(depth, intr, mask, points)
-            timings["appearance"] = 1e3 * (time.perf_counter() - t_app)
+        tracking = self._state is not None and self._calibration is not None
+        t_app = time.perf_counter()
+        appearance, self._frame_votes = self._pixel_evidence(
+            depth, intr, mask, points, appearance=tracking
+        )
+        timings["appearance"] = 1e3 * (time.perf_counter() - t_app)
+        if tracking:
             attempt = self._track(points, graph, timings, appearance)
             if not attempt.health.ok:
                 message = f"{where}: track lost ({attempt.health.reason}); re-initialized"
@@ -598,13 +632,19 @@ class PoseTracker:
                 self._seed_registration = register_nonrigid(source[:20], source[:20], max_iter=1)
         return self._seed_registration
 
-    def _appearance(self, depth, intr, mask, points) -> np.ndarray | None:
-        """The forest's ``(N, 15)`` part probabilities at each point's pixel, or None."""
-        if self.appearance_weight <= 0:
-            return None
+    def _pixel_evidence(self, depth, intr, mask, points, *, appearance: bool):
+        """What the forest says at each point's pixel: ``(probabilities, votes)``.
+
+        ``probabilities`` is ``(N, 15)`` (None unless ``appearance`` and an
+        appearance weight); ``votes`` the joint votes cast (:meth:`JointVotes.cast`;
+        None where the forest has none or the vote weights are 0). One descent
+        of the forest serves both.
+        """
         forest = self._get_forest()
-        if not hasattr(forest, "predict_pixels"):
-            return None
+        want_parts = appearance and self.appearance_weight > 0
+        want_votes = max(self.vote_weights) > 0 and getattr(forest, "votes", None) is not None
+        if not hasattr(forest, "predict_pixels") or not (want_parts or want_votes):
+            return None, None
         # A point is a voxel centroid: take the pixel it projects to where that pixel
         # is the person's, else the nearest of the person's pixels within 3 pixels
         # (none: a uniform row, no appearance evidence).
@@ -621,7 +661,13 @@ class PoseTracker:
             hit = mask[r, c]
             rows[off[hit]], cols[off[hit]] = r[hit], c[hit]
             off = off[~hit]
-        return forest.predict_pixels(depth, np.column_stack([rows, cols]), intr, mask=mask)
+        pixels = np.column_stack([rows, cols])
+        if not want_votes:
+            return forest.predict_pixels(depth, pixels, intr, mask=mask), None
+        parts, leaves = forest.predict_pixels(depth, pixels, intr, mask=mask, return_leaves=True)
+        # Each point votes from where it lies, not from the pixel it was read at.
+        votes = forest.votes.cast(points, leaves)
+        return (parts if want_parts else None), votes
 
     def _fuse(self, post: np.ndarray, appearance: np.ndarray | None) -> np.ndarray:
         """Product of experts of the tracked posterior and the forest's probabilities."""
@@ -699,6 +745,7 @@ class PoseTracker:
             shoulder_offset=cal.shoulders,
             **unanchored,
         )
+        fit = self._refine_with_votes(fit)
         health = assess(
             points,
             labels,
@@ -709,6 +756,19 @@ class PoseTracker:
             in_view=self._in_view(fit.joints),
         )
         return _Attempt(labels=labels, fit=fit, health=health)
+
+    def _refine_with_votes(self, fit: SkeletonFit) -> SkeletonFit:
+        """The fit moved towards this frame's joint votes (unchanged without votes)."""
+        if self._frame_votes is None or not np.isfinite(fit.joints).all():
+            return fit
+        from posedrift.labelling import joint_modes
+
+        voted = joint_modes(
+            *self._frame_votes, fit.joints, bandwidth=self.vote_bandwidth, joints=VOTED_JOINTS
+        )
+        trunk, arm = self.vote_weights
+        joints = refine_with_votes(fit.joints, voted, trunk_weight=trunk, arm_weight=arm)
+        return replace(fit, joints=joints)
 
     def _in_view(self, joints: np.ndarray) -> np.ndarray:
         """``(15,)`` whether each joint projects inside the image (False where unknown)."""
