@@ -50,6 +50,8 @@ def test_joint_votes_reject_malformed_arrays():
         JointVotes(joint=good.joint, offset=good.offset * np.nan, weight=good.weight, radius=0.2)
     with pytest.raises(ValueError, match="'radius'"):
         JointVotes(joint=good.joint, offset=good.offset, weight=good.weight, radius=-1.0)
+    with pytest.raises(ValueError, match="within the radius"):
+        JointVotes(joint=good.joint, offset=good.offset, weight=good.weight, radius=0.05)
 
 
 def test_joint_modes_climb_to_the_cluster_by_the_seed():

@@ -80,6 +80,13 @@ class JointVotes:
         if weight.size and (weight.min() < 0 or weight.max() > 1):
             raise ValueError(f"The 'weight' array of {caller} must lie in [0, 1].")
         radius = check_scalar(self.radius, "radius", low=0.0, caller=caller)
+        # A mean of offsets shorter than the radius: no component can exceed it (the
+        # model file stores them in steps of radius / 127).
+        if offset.size and np.abs(offset).max() > radius * (1 + 1e-5):
+            raise ValueError(
+                f"The 'offset' array of {caller} must lie within the radius ({radius:g} m) "
+                f"in each component. Got {np.abs(offset).max():g}."
+            )
         for name, value in (("joint", joint), ("offset", offset), ("weight", weight)):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
@@ -90,7 +97,9 @@ class JointVotes:
         """Number of leaves (rows)."""
         return len(self.joint)
 
-    def cast(self, points: np.ndarray, leaves: np.ndarray) -> tuple[np.ndarray, ...]:
+    def cast(
+        self, points: np.ndarray, leaves: np.ndarray, *, joints=None
+    ) -> tuple[np.ndarray, ...]:
         """Every pixel's votes.
 
         Parameters
@@ -99,6 +108,8 @@ class JointVotes:
             The pixels' camera-frame points, metres.
         leaves : (T, N) int
             The leaf row each pixel reached in each tree; -1 for none.
+        joints : sequence of int, optional
+            Only the votes for these joints (indices). Default all.
 
         Returns
         -------
@@ -114,11 +125,16 @@ class JointVotes:
         reached = leaves >= 0
         rows = leaves[reached]
         owner = np.broadcast_to(np.arange(points.shape[0]), leaves.shape)[reached]
-        weight = self.weight[rows]
-        live = weight > 0
-        where = points[owner][:, None, :] + self.offset[rows]
-        share = weight[live] / max(len(leaves), 1)
-        return where[live], self.joint[rows][live].astype(np.intp), share.astype(float)
+        live = self.weight[rows] > 0
+        if joints is not None:
+            wanted = np.zeros(N_JOINTS + 1, dtype=bool)  # the last entry: index -1
+            wanted[np.asarray(joints, dtype=np.intp)] = True
+            live &= wanted[self.joint[rows]]
+        slot, k = np.nonzero(live)
+        leaf = rows[slot]
+        where = points[owner[slot]] + self.offset[leaf, k]
+        share = self.weight[leaf, k] / max(len(leaves), 1)
+        return where, self.joint[leaf, k].astype(np.intp), share.astype(float)
 
 
 def joint_modes(
@@ -184,16 +200,20 @@ def joint_modes(
             np.bincount(joint, weight * where[:, c], minlength=N_JOINTS)[unseeded] / total[unseeded]
         )
     scale = -0.5 / bandwidth**2
+    # One bincount per step gives each joint's kernel mass and weighted sums of x, y, z:
+    # the votes' four quantities sit in four blocks of bins.
+    n = len(joint)
+    bins = np.concatenate([joint + c * N_JOINTS for c in range(4)])
+    columns = np.ascontiguousarray(where.T)
+    stacked = np.empty(4 * n)
     for _ in range(iterations):
         d = where - x[joint]
         k = weight * np.exp(scale * np.einsum("ij,ij->i", d, d))
-        mass = np.bincount(joint, k, minlength=N_JOINTS)
-        live &= mass > 1e-9  # a climb that left every vote behind places nothing
-        safe = np.where(live, mass, 1.0)
-        for c in range(3):
-            x[:, c] = np.where(
-                live, np.bincount(joint, k * where[:, c], minlength=N_JOINTS) / safe, x[:, c]
-            )
+        stacked[:n] = k
+        np.multiply(columns, k, out=stacked[n:].reshape(3, n))
+        sums = np.bincount(bins, stacked, minlength=4 * N_JOINTS).reshape(4, N_JOINTS)
+        live &= sums[0] > 1e-9  # a climb that left every vote behind places nothing
+        x[live] = (sums[1:, live] / sums[0, live]).T
     out[live] = x[live]
     return out
 

@@ -666,7 +666,7 @@ class PoseTracker:
             return forest.predict_pixels(depth, pixels, intr, mask=mask), None
         parts, leaves = forest.predict_pixels(depth, pixels, intr, mask=mask, return_leaves=True)
         # Each point votes from where it lies, not from the pixel it was read at.
-        votes = forest.votes.cast(points, leaves)
+        votes = forest.votes.cast(points, leaves, joints=VOTED_JOINTS)
         return (parts if want_parts else None), votes
 
     def _fuse(self, post: np.ndarray, appearance: np.ndarray | None) -> np.ndarray:
