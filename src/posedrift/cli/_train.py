@@ -145,7 +145,8 @@ def train(
             )
         with tr._progress(progress_enabled(), "loading motions", len(paths) + 1) as advance:
             motions = tr.load_training_motions(paths, on_motion=lambda _: advance())
-        # The votes' stream is a third child: the trees' two are as before votes.
+        # The votes draw from a third child stream, so the trees' two streams (and the
+        # trees) are what they were before there were votes.
         render_rng, fit_rng, vote_rng = (
             np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3)
         )
