@@ -204,8 +204,9 @@ class PoseTracker:
         Girshick et al. 2011): each point's leaves vote for where the joints are,
         each joint is the mode of its votes nearest the fitted skeleton's joint,
         and :func:`posedrift.skeleton.refine_with_votes` moves the head, neck and
-        shoulders and turns the upper arms that far towards them. ``(0, 0)``, or a
-        forest without votes, keeps the skeleton from the labels alone.
+        shoulders and turns the upper arms that far towards them in the reported
+        skeleton (the track itself keeps the labels' skeleton). ``(0, 0)``, or a
+        forest without votes, reports the skeleton from the labels alone.
     vote_bandwidth : float
         Mean-shift kernel width of the votes (metres).
     rng : int or Generator
@@ -498,11 +499,16 @@ class PoseTracker:
             joints=fit.joints,
             registration=attempt.registration,
         )
+        # The votes refine what is reported, not the track: fed back as the next
+        # frame's prediction, a refined arm could lock in a wrong pose (docs/RESULTS.md).
+        t_votes = time.perf_counter()
+        reported = self._refine_with_votes(fit.joints)
+        timings["skeleton"] = timings.get("skeleton", 0.0) + 1e3 * (time.perf_counter() - t_votes)
         timings["total"] = 1e3 * (time.perf_counter() - t0)
         return FrameResult(
             index=frame.index,
             status=status,
-            joints=fit.joints,
+            joints=reported,
             confidence=fit.confidence,
             points=points,
             labels=attempt.labels,
@@ -745,7 +751,6 @@ class PoseTracker:
             shoulder_offset=cal.shoulders,
             **unanchored,
         )
-        fit = self._refine_with_votes(fit)
         health = assess(
             points,
             labels,
@@ -757,18 +762,17 @@ class PoseTracker:
         )
         return _Attempt(labels=labels, fit=fit, health=health)
 
-    def _refine_with_votes(self, fit: SkeletonFit) -> SkeletonFit:
-        """The fit moved towards this frame's joint votes (unchanged without votes)."""
-        if self._frame_votes is None or not np.isfinite(fit.joints).all():
-            return fit
+    def _refine_with_votes(self, joints: np.ndarray) -> np.ndarray:
+        """``joints`` moved towards this frame's joint votes (as they are without votes)."""
+        if self._frame_votes is None or not np.isfinite(joints).all():
+            return joints
         from posedrift.labelling import joint_modes
 
         voted = joint_modes(
-            *self._frame_votes, fit.joints, bandwidth=self.vote_bandwidth, joints=VOTED_JOINTS
+            *self._frame_votes, joints, bandwidth=self.vote_bandwidth, joints=VOTED_JOINTS
         )
         trunk, arm = self.vote_weights
-        joints = refine_with_votes(fit.joints, voted, trunk_weight=trunk, arm_weight=arm)
-        return replace(fit, joints=joints)
+        return refine_with_votes(joints, voted, trunk_weight=trunk, arm_weight=arm)
 
     def _in_view(self, joints: np.ndarray) -> np.ndarray:
         """``(15,)`` whether each joint projects inside the image (False where unknown)."""
