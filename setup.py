@@ -1,9 +1,9 @@
 """Build the optional compiled kernels (``posedrift.registration._cestep``,
-``posedrift.labelling._ckernels``).
+``posedrift.labelling._ckernels``, ``posedrift.skeleton._cmeanshift``).
 
 Metadata lives in ``pyproject.toml``; this file only declares the C extensions (CPD's
 fused E-step in float64 and float32 and its low-rank M-step; relabelling's Dijkstra and
-the forest's per-point descent). They use the plain buffer protocol (no NumPy C API), so
+the forest's per-point descent; grouped mean shift). They use the plain buffer protocol (no NumPy C API), so
 NumPy is not a build requirement. Both are optional: when one cannot be compiled the
 install still succeeds and posedrift falls back to its NumPy twins.
 """
@@ -30,6 +30,13 @@ setup(
         Extension(
             "posedrift.labelling._ckernels",
             sources=["src/posedrift/labelling/_ckernels.c"],
+            extra_compile_args=["-O3"],
+            optional=True,
+        ),
+        # Mean shift of the part modes and the joint votes. Plain -O3 (see above).
+        Extension(
+            "posedrift.skeleton._cmeanshift",
+            sources=["src/posedrift/skeleton/_cmeanshift.c"],
             extra_compile_args=["-O3"],
             optional=True,
         ),

@@ -35,3 +35,15 @@ def mocap_dir(shared_data: Path) -> Path:
 def utd_dir(shared_data: Path) -> Path:
     """``shared/data/utd-mhad`` (holds ``Depth/`` and ``Skeleton/``)."""
     return shared_data / "utd-mhad"
+
+
+@pytest.fixture(params=["compiled", "numpy"])
+def meanshift_kernel(request, monkeypatch) -> str:
+    """Run a test with the compiled mean shift (where built) and again with its NumPy twin."""
+    from posedrift.skeleton import _meanshift
+
+    if request.param == "compiled" and _meanshift._cmeanshift is None:
+        pytest.skip("the compiled mean shift (posedrift.skeleton._cmeanshift) is not built")
+    if request.param == "numpy":
+        monkeypatch.setattr(_meanshift, "_cmeanshift", None)
+    return request.param

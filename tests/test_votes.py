@@ -23,12 +23,13 @@ def _votes(n_leaves: int = 3) -> JointVotes:
     return JointVotes(joint=joint, offset=offset, weight=weight, radius=0.2)
 
 
-def test_cast_puts_each_vote_at_its_point_plus_the_leaf_offset():
+@pytest.mark.parametrize("compiled", [True, False])
+def test_cast_puts_each_vote_at_its_point_plus_the_leaf_offset(compiled):
     votes = _votes()
     points = np.array([[0.0, 0.0, 2.0], [1.0, 0.0, 2.0], [2.0, 0.0, 2.0]])
     # Two trees; point 2 reached nothing in tree 1 (-1) and a vote-less leaf in tree 0.
     leaves = np.array([[0, 1, 2], [0, 0, -1]])
-    where, joint, weight = votes.cast(points, leaves)
+    where, joint, weight = votes.cast(points, leaves, compiled=compiled)
     order = np.lexsort((where[:, 0], joint))
     where, joint, weight = where[order], joint[order], weight[order]
     np.testing.assert_allclose(
@@ -36,6 +37,31 @@ def test_cast_puts_each_vote_at_its_point_plus_the_leaf_offset():
     )
     assert joint.tolist() == [J["neck"]] * 3 + [J["left_hand"]]
     np.testing.assert_allclose(weight, [0.4, 0.4, 0.4, 0.2])  # shares over two trees
+
+
+def test_compiled_cast_gives_the_numpy_votes_exactly():
+    rng = np.random.default_rng(3)
+    n_leaves, per_leaf = 300, 4
+    joint = rng.integers(-1, 15, size=(n_leaves, per_leaf)).astype(np.int8)
+    weight = np.where(joint >= 0, rng.random((n_leaves, per_leaf)), 0.0).astype(np.float32)
+    weight[::7] = 0.0  # leaves without votes
+    offset = rng.uniform(-0.2, 0.2, size=(n_leaves, per_leaf, 3)).astype(np.float32)
+    votes = JointVotes(joint=joint, offset=offset, weight=weight, radius=0.2)
+    points = rng.normal([0, 0, 2.5], 0.4, size=(500, 3))
+    leaves = rng.integers(-1, n_leaves, size=(3, 500))
+    for joints in (None, [1, 2, 5, 6]):
+        fast = votes.cast(points, leaves, joints=joints)
+        slow = votes.cast(points, leaves, joints=joints, compiled=False)
+        assert len(fast[0]) > 1000
+        for a, b in zip(fast, slow, strict=True):
+            np.testing.assert_array_equal(a, b)
+            assert a.dtype == b.dtype
+    with pytest.raises(ValueError, match="'leaves' argument of JointVotes.cast"):
+        votes.cast(points, leaves[:, :-1])
+    with pytest.raises(ValueError, match="'leaves' argument of JointVotes.cast"):
+        votes.cast(points, leaves + n_leaves)
+    with pytest.raises(ValueError, match=r"points \(N, 3\) and leaves \(T, N\)"):
+        votes.cast(points[:, :2], leaves)
 
 
 def test_joint_votes_reject_malformed_arrays():
@@ -54,7 +80,7 @@ def test_joint_votes_reject_malformed_arrays():
         JointVotes(joint=good.joint, offset=good.offset, weight=good.weight, radius=0.05)
 
 
-def test_joint_modes_climb_to_the_cluster_by_the_seed():
+def test_joint_modes_climb_to_the_cluster_by_the_seed(meanshift_kernel):
     rng = np.random.default_rng(0)
     centre = np.array([0.1, -0.3, 2.5])
     other = centre + [0.4, 0.0, 0.0]  # a second, heavier cluster far from the seed

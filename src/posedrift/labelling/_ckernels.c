@@ -1,4 +1,5 @@
-/* Compiled kernels of posedrift.labelling: geodesic Dijkstra and the forest's descent.
+/* Compiled kernels of posedrift.labelling: geodesic Dijkstra, the forest's descent and
+ * its joint votes.
  *
  * dijkstra(indptr, indices, data, n, sources, limits, out) -> None
  *   Shortest paths from several sources over a CSR graph (Algorithm 2's geodesics).
@@ -27,8 +28,16 @@
  *   The same float32 operations in the same order as features.probe (no contraction into
  *   fused multiply-adds), so the same leaves as the NumPy descent.
  *
- * The twins are scipy's dijkstra and the NumPy descent; tests/test_relabel.py and
- * tests/test_forest.py compare them. Plain buffer protocol (no NumPy C API). Build with
+ * cast(points, leaves, joint, offset, weight, wanted, where, joint_out, weight_out) -> M
+ *   Every pixel's joint votes (JointVotes.cast), in the same order: tree, pixel, vote.
+ *   points  : (N, 3) float64; leaves: (T, N) int32 leaf rows, -1 for none
+ *   joint   : (L, K) int8 (-1 none); offset: (L, K, 3) float32; weight: (L, K) float32
+ *   wanted  : (J,) uint8, the joints whose votes are cast
+ *   where, joint_out, weight_out : (T * N * K, 3) float64, (T * N * K,) int64 and float64,
+ *             written in their first M rows: point + offset, the joint, weight / T
+ *
+ * The twins are scipy's dijkstra, the NumPy descent and JointVotes.cast's NumPy path; tests/test_relabel.py and
+ * tests/test_forest.py and tests/test_votes.py compare them. Plain buffer protocol (no NumPy C API). Build with
  * plain -O2/-O3: it relies on IEEE infinities and float32 rounding, so never with
  * -ffast-math or -ffinite-math-only.
  */
@@ -306,10 +315,90 @@ static PyObject *descend(PyObject *self, PyObject *args) {
     Py_RETURN_NONE;
 }
 
+static PyObject *cast(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *objs[9];
+    if (!PyArg_ParseTuple(args, "OOOOOOOOO", &objs[0], &objs[1], &objs[2], &objs[3], &objs[4],
+                          &objs[5], &objs[6], &objs[7], &objs[8]))
+        return NULL;
+    static const Py_ssize_t itemsize[9] = {8, 4, 1, 4, 4, 1, 8, 8, 8};
+    Py_buffer b[9];
+    int got = 0;
+    for (; got < 9; got++) {
+        int flags = PyBUF_C_CONTIGUOUS | PyBUF_ND | (got >= 6 ? PyBUF_WRITABLE : 0);
+        if (PyObject_GetBuffer(objs[got], &b[got], flags) < 0) break;
+        if (b[got].itemsize != itemsize[got]) {
+            PyBuffer_Release(&b[got]);
+            PyErr_SetString(PyExc_ValueError, "cast: a buffer has the wrong item size");
+            break;
+        }
+    }
+    if (got < 9) {
+        for (int i = 0; i < got; i++) PyBuffer_Release(&b[i]);
+        return NULL;
+    }
+    const Py_ssize_t n = b[0].len / 24, n_wanted = b[5].len;
+    const Py_ssize_t n_trees = (b[1].ndim == 2) ? b[1].shape[0] : 0;
+    const Py_ssize_t per_leaf = (b[2].ndim == 2) ? b[2].shape[1] : 0;
+    const Py_ssize_t n_leaves = per_leaf > 0 ? b[2].len / per_leaf : 0;
+    const Py_ssize_t capacity = n_trees * n * per_leaf;
+    int ok = b[1].ndim == 2 && b[1].shape[1] == n && b[2].ndim == 2 &&
+             b[3].len == 12 * n_leaves * per_leaf && b[4].len == 4 * n_leaves * per_leaf &&
+             b[6].len >= 24 * capacity && b[7].len >= 8 * capacity && b[8].len >= 8 * capacity;
+    if (!ok) {
+        for (int i = 0; i < 9; i++) PyBuffer_Release(&b[i]);
+        PyErr_SetString(PyExc_ValueError, "cast: inconsistent buffers");
+        return NULL;
+    }
+    const double *points = (const double *)b[0].buf;
+    const int32_t *leaves = (const int32_t *)b[1].buf;
+    const int8_t *joint = (const int8_t *)b[2].buf;
+    const float *offset = (const float *)b[3].buf, *weight = (const float *)b[4].buf;
+    const uint8_t *wanted = (const uint8_t *)b[5].buf;
+    double *where = (double *)b[6].buf, *share = (double *)b[8].buf;
+    int64_t *joint_out = (int64_t *)b[7].buf;
+    const float trees = (float)(n_trees > 0 ? n_trees : 1);
+    Py_ssize_t m = 0;
+    int bad = 0;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t j = 0; j < n_trees * n && !bad; j++) {
+        const int32_t leaf = leaves[j];
+        if (leaf < 0) continue;
+        if (leaf >= n_leaves) {
+            bad = 1;
+            break;
+        }
+        const double *p = points + 3 * (j % n);
+        for (Py_ssize_t k = 0; k < per_leaf; k++) {
+            const Py_ssize_t slot = (Py_ssize_t)leaf * per_leaf + k;
+            const int8_t which = joint[slot];
+            if (!(weight[slot] > 0.0f) || which < 0 || which >= n_wanted || !wanted[which])
+                continue;
+            const float *o = offset + 3 * slot;
+            where[3 * m] = p[0] + (double)o[0];
+            where[3 * m + 1] = p[1] + (double)o[1];
+            where[3 * m + 2] = p[2] + (double)o[2];
+            joint_out[m] = which;
+            share[m] = (double)(weight[slot] / trees);
+            m++;
+        }
+    }
+    Py_END_ALLOW_THREADS
+    for (int i = 0; i < 9; i++) PyBuffer_Release(&b[i]);
+    if (bad) {
+        PyErr_SetString(PyExc_ValueError, "cast: a leaf row is out of range");
+        return NULL;
+    }
+    return PyLong_FromSsize_t(m);
+}
+
 static PyMethodDef methods[] = {
     {"descend", descend, METH_VARARGS,
      "descend(table, image, rows, cols, row_scale, col_scale, roots, levels, height, width, "
      "out): the forest's descent."},
+    {"cast", cast, METH_VARARGS,
+     "cast(points, leaves, joint, offset, weight, wanted, where, joint_out, weight_out) -> M: "
+     "the joint votes."},
     {"dijkstra", dijkstra, METH_VARARGS,
      "dijkstra(indptr, indices, data, n, sources, limits, out): multi-run Dijkstra."},
     {NULL, NULL, 0, NULL}};

@@ -21,6 +21,12 @@ import numpy as np
 
 from posedrift._validation import check_rng, check_scalar
 from posedrift.skeleton import JOINT_NAMES
+from posedrift.skeleton._meanshift import _shift_modes
+
+try:  # the compiled kernel is optional: the NumPy path casts the same votes
+    from posedrift.labelling import _ckernels  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the build
+    _ckernels = None
 
 N_JOINTS = len(JOINT_NAMES)
 
@@ -98,7 +104,7 @@ class JointVotes:
         return len(self.joint)
 
     def cast(
-        self, points: np.ndarray, leaves: np.ndarray, *, joints=None
+        self, points: np.ndarray, leaves: np.ndarray, *, joints=None, compiled: bool = True
     ) -> tuple[np.ndarray, ...]:
         """Every pixel's votes.
 
@@ -110,6 +116,9 @@ class JointVotes:
             The leaf row each pixel reached in each tree; -1 for none.
         joints : sequence of int, optional
             Only the votes for these joints (indices). Default all.
+        compiled : bool
+            Use the compiled kernel where it is built (the same votes); False forces
+            the NumPy path.
 
         Returns
         -------
@@ -120,21 +129,46 @@ class JointVotes:
         weight : (M,) float
             Each vote's weight (the tree's share, divided by the number of trees).
         """
-        points = np.asarray(points, dtype=float)
+        points = np.ascontiguousarray(points, dtype=np.float64)
         leaves = np.asarray(leaves)
+        if points.ndim != 2 or points.shape[1] != 3 or leaves.ndim != 2:
+            raise ValueError(
+                "The arguments of JointVotes.cast must be points (N, 3) and leaves (T, N). "
+                f"Got {points.shape} and {leaves.shape}."
+            )
+        if leaves.shape[1] != len(points) or (leaves.size and leaves.max() >= self.n_leaves):
+            raise ValueError(
+                f"The 'leaves' argument of JointVotes.cast must be (T, {len(points)}) rows "
+                f"below {self.n_leaves}. Got shape {leaves.shape}, "
+                f"largest {leaves.max(initial=-1)}."
+            )
+        wanted = np.zeros(N_JOINTS, dtype=bool)
+        wanted[slice(None) if joints is None else np.asarray(joints, dtype=np.intp)] = True
+        if compiled and _ckernels is not None:
+            return self._cast_compiled(points, leaves, wanted)
         reached = leaves >= 0
         rows = leaves[reached]
         owner = np.broadcast_to(np.arange(points.shape[0]), leaves.shape)[reached]
         live = self.weight[rows] > 0
-        if joints is not None:
-            wanted = np.zeros(N_JOINTS + 1, dtype=bool)  # the last entry: index -1
-            wanted[np.asarray(joints, dtype=np.intp)] = True
-            live &= wanted[self.joint[rows]]
+        live &= np.append(wanted, False)[self.joint[rows]]  # the last entry: index -1
         slot, k = np.nonzero(live)
         leaf = rows[slot]
         where = points[owner[slot]] + self.offset[leaf, k]
         share = self.weight[leaf, k] / max(len(leaves), 1)
-        return where, self.joint[leaf, k].astype(np.intp), share.astype(float)
+        return where, self.joint[leaf, k].astype(np.int64), share.astype(float)
+
+    def _cast_compiled(self, points, leaves, wanted):
+        """:meth:`cast` by the compiled kernel (``_ckernels.c``): the same votes."""
+        leaves = np.ascontiguousarray(leaves, dtype=np.int32)
+        capacity = leaves.size * self.joint.shape[1]
+        where = np.empty((capacity, 3))
+        joint = np.empty(capacity, dtype=np.int64)
+        share = np.empty(capacity)
+        m = _ckernels.cast(
+            points, leaves, self.joint, self.offset, self.weight, wanted.view(np.uint8),
+            where, joint, share,
+        )  # fmt: skip
+        return where[:m], joint[:m], share[:m]
 
 
 def joint_modes(
@@ -192,28 +226,26 @@ def joint_modes(
     live = total >= min_weight
     if not live.any():
         return out
-    # All joints climb together: per-joint sums are bincounts over the votes.
+    # All joints climb together (skeleton's grouped mean shift); an unseeded joint
+    # starts from its votes' weighted mean.
     x = np.array(seeds, dtype=float)
     unseeded = live & ~np.isfinite(x).all(axis=1)
     for c in range(3):
         x[unseeded, c] = (
             np.bincount(joint, weight * where[:, c], minlength=N_JOINTS)[unseeded] / total[unseeded]
         )
-    scale = -0.5 / bandwidth**2
-    # One bincount per step gives each joint's kernel mass and weighted sums of x, y, z:
-    # the votes' four quantities sit in four blocks of bins.
-    n = len(joint)
-    bins = np.concatenate([joint + c * N_JOINTS for c in range(4)])
-    columns = np.ascontiguousarray(where.T)
-    stacked = np.empty(4 * n)
-    for _ in range(iterations):
-        d = where - x[joint]
-        k = weight * np.exp(scale * np.einsum("ij,ij->i", d, d))
-        stacked[:n] = k
-        np.multiply(columns, k, out=stacked[n:].reshape(3, n))
-        sums = np.bincount(bins, stacked, minlength=4 * N_JOINTS).reshape(4, N_JOINTS)
-        live &= sums[0] > 1e-9  # a climb that left every vote behind places nothing
-        x[live] = (sums[1:, live] / sums[0, live]).T
+    _shift_modes(
+        where,
+        joint,
+        weight,
+        x,
+        live,
+        scale=-0.5 / bandwidth**2,
+        max_iter=iterations,
+        tol=0.0,
+        min_mass=1e-9,
+        drop_lost=True,  # a climb that left every vote behind places nothing
+    )
     out[live] = x[live]
     return out
 

@@ -6,6 +6,11 @@ import numpy as np
 
 from posedrift._validation import check_points, check_scalar
 
+try:  # the compiled kernel is optional: its NumPy twin gives the same modes
+    from posedrift.skeleton import _cmeanshift  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the build
+    _cmeanshift = None
+
 
 def part_modes(
     points: np.ndarray,
@@ -81,46 +86,142 @@ def part_modes(
         modes[have, d] = (
             np.bincount(lab, weights=w * p[:, d], minlength=n_parts)[have] / counts[have]
         )
-    inv2h2 = 0.5 / bandwidth**2
-    # Only the parts with points, with column-major state: coordinates (3, M) and modes
-    # (3, parts); one bincount per iteration over [kernel, kernel * x, kernel * y,
-    # kernel * z] (each bin sums its points in input order, as separate bincounts would).
-    live = np.flatnonzero(have)
-    n_live = len(live)
-    slot = np.zeros(n_parts, dtype=np.intp)
-    slot[live] = np.arange(n_live)
-    lab = slot[lab]
-    coords = np.ascontiguousarray(p.T)
-    centre = np.ascontiguousarray(modes[live].T)
-    groups = (lab[None, :] + n_live * np.arange(4)[:, None]).ravel()
+    live = have.copy()
+    _shift_modes(
+        p,
+        lab,
+        w,
+        modes,
+        live,
+        scale=-0.5 / bandwidth**2,
+        max_iter=max_iter,
+        tol=tol,
+        min_mass=1e-12,
+        drop_lost=False,
+    )
+    return (modes, counts) if return_counts else modes
+
+
+def _shift_modes(
+    coords: np.ndarray,
+    group: np.ndarray,
+    weight: np.ndarray,
+    centre: np.ndarray,
+    live: np.ndarray,
+    *,
+    scale: float,
+    max_iter: int,
+    tol: float,
+    min_mass: float,
+    drop_lost: bool,
+    compiled: bool = True,
+) -> int:
+    """Grouped Gaussian mean shift, in place: the one kernel behind every mode search.
+
+    Each live group's ``centre`` row climbs the density of its own points (``coords``
+    rows whose ``group`` is its index), weighted by ``weight * exp(scale * r^2)``. A
+    group whose kernel mass falls to ``min_mass`` stays put, or with ``drop_lost``
+    leaves ``live``. Stops after ``max_iter`` steps, when no group moved or when no
+    centre moved more than ``tol`` metres. The compiled kernel (``_cmeanshift.c``)
+    where it is built, else its NumPy twin (the same sums in the same order).
+
+    Parameters
+    ----------
+    coords : (M, 3) float
+    group : (M,) int
+        In ``[0, G)``.
+    weight : (M,) float
+    centre : (G, 3) float
+        Starting points; overwritten with the modes.
+    live : (G,) bool
+        The groups that climb; overwritten.
+
+    Returns
+    -------
+    int
+        Steps taken.
+    """
+    coords = np.ascontiguousarray(coords, dtype=np.float64)
+    group = np.ascontiguousarray(group, dtype=np.int64)
+    weight = np.ascontiguousarray(weight, dtype=np.float64)
+    if (
+        compiled
+        and _cmeanshift is not None
+        and centre.flags.c_contiguous
+        and live.flags.c_contiguous
+    ):
+        return _cmeanshift.shift(
+            coords,
+            group,
+            weight,
+            centre,
+            live.view(np.uint8),
+            float(scale),
+            int(max_iter),
+            float(tol),
+            float(min_mass),
+            bool(drop_lost),
+        )
+    return _shift_modes_numpy(
+        coords,
+        group,
+        weight,
+        centre,
+        live,
+        scale=scale,
+        max_iter=max_iter,
+        tol=tol,
+        min_mass=min_mass,
+        drop_lost=drop_lost,
+    )
+
+
+def _shift_modes_numpy(
+    coords, group, weight, centre, live, *, scale, max_iter, tol, min_mass, drop_lost
+) -> int:
+    """:func:`_shift_modes` in NumPy: one bincount per step over the live groups."""
+    slots = np.flatnonzero(live)
+    if len(slots) == 0 or max_iter < 1:
+        return 0
+    slot_of = np.full(len(live), -1, dtype=np.intp)
+    slot_of[slots] = np.arange(len(slots))
+    lab = slot_of[group]
+    keep = lab >= 0
+    lab, w = lab[keep], weight[keep]
+    # Column-major state: coordinates (3, M') and centres (3, live); one bincount per
+    # step over [kernel, kernel * x, kernel * y, kernel * z] (each bin sums its points
+    # in input order, as the compiled kernel does).
+    cols = np.ascontiguousarray(coords[keep].T)
+    state = np.ascontiguousarray(centre[slots].T)
+    alive = np.ones(len(slots), dtype=bool)
+    n_live = len(slots)
+    bins = (lab[None, :] + n_live * np.arange(4)[:, None]).ravel()
     weighted = np.empty((4, len(lab)))
     kernel = weighted[0]
-    diff = np.empty_like(coords)
-    for _ in range(max_iter):
-        np.subtract(coords, np.take(centre, lab, axis=1), out=diff)
+    diff = np.empty_like(cols)
+    step = 0
+    while step < max_iter:
+        step += 1
+        np.subtract(cols, np.take(state, lab, axis=1), out=diff)
         diff *= diff
         r2 = diff[0] + diff[1]
         r2 += diff[2]
-        np.negative(r2, out=r2)
-        r2 *= inv2h2
+        r2 *= scale
         np.exp(r2, out=kernel)
-        if weights is not None:
-            np.multiply(w, kernel, out=kernel)
-        np.multiply(coords, kernel, out=weighted[1:])
-        sums = np.bincount(groups, weights=weighted.ravel(), minlength=4 * n_live)
+        np.multiply(w, kernel, out=kernel)
+        np.multiply(cols, kernel, out=weighted[1:])
+        sums = np.bincount(bins, weights=weighted.ravel(), minlength=4 * n_live)
         sums = sums.reshape(4, n_live)
-        den = sums[0]
-        move = den > 1e-12
-        if move.all():
-            new = sums[1:] / den
-        elif move.any():
-            new = centre.copy()
-            new[:, move] = sums[1:, move] / den[move]
-        else:
+        move = alive & (sums[0] > min_mass)
+        if drop_lost:
+            alive = move
+        if not move.any():
             break
-        shift = float(np.abs(new - centre).max())
-        centre = new
-        if shift < tol:
+        new = sums[1:, move] / sums[0, move]
+        moved = float(np.abs(new - state[:, move]).max())
+        state[:, move] = new
+        if moved < tol:
             break
-    modes[live] = centre.T
-    return (modes, counts) if return_counts else modes
+    centre[slots] = state.T
+    live[slots] = alive
+    return step
