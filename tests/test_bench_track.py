@@ -24,6 +24,7 @@ def test_cli_bench_track_writes_table_and_json(tmp_path):
     assert data["frames"] == 4 and len(data["repeats_cpu_ms"]) == 2
     assert data["n_points"] == 400 and data["sequences"] == ["builtin"]
     assert data["stage_clock"] == "cpu"  # the stage timings were taken in CPU time
+    assert "compiled kernels:" in data["machine"] and "machine:" in result.output
     import time
 
     from posedrift.tracking import _tracker
@@ -80,3 +81,23 @@ def test_cli_bench_track_in_a_room_with_another_camera(tmp_path):
 def test_bench_track_rejects_an_unknown_camera():
     bad = CliRunner().invoke(app, ["-q", "bench", "track", "--camera", "pinhole9"])
     assert bad.exit_code == 2 and "--camera must be one of" in bad.output
+
+
+def test_compiled_kernels_are_reported(monkeypatch):
+    import importlib
+
+    from posedrift import _build, compiled_kernels
+
+    have = compiled_kernels()
+    assert sorted(have) == sorted(_build.KERNELS)
+    assert all(isinstance(v, bool) for v in have.values())
+    real = importlib.import_module
+
+    def without_mean_shift(name, *args):
+        if name == "posedrift.skeleton._cmeanshift":
+            raise ImportError(name)
+        return real(name, *args)
+
+    monkeypatch.setattr(importlib, "import_module", without_mean_shift)
+    assert compiled_kernels()["posedrift.skeleton._cmeanshift"] is False
+    assert "NumPy for skeleton._cmeanshift" in _build.compiled_summary()

@@ -12,6 +12,8 @@ capture, body model, renderer), ``baselines``, ``evaluation``, ``io``,
 ``visualization`` and ``cli``.
 """
 
+from posedrift._build import compiled_kernels
+
 __version__ = "0.1.0"
 
-__all__ = ["__version__"]
+__all__ = ["__version__", "compiled_kernels"]

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from posedrift._build import compiled_summary
 from posedrift._validation import check_scalar
 
 STAGES: tuple[str, ...] = (
@@ -163,6 +164,8 @@ class TrackBenchmark:
             f"wall {self.wall_ms:.2f} ms/frame; statuses (last repeat): {counts}; "
             f"per-repeat CPU ms/frame: {', '.join(f'{t:.2f}' for t in self.repeats_cpu_ms)}",
         ]
+        if self.machine:
+            lines.append(f"machine: {self.machine}")
         return "\n".join(lines)
 
 
@@ -400,7 +403,7 @@ def bench_track(
         stage_clock=clock,
         threads=threads,
         machine=f"{platform.processor() or platform.machine()}, Python "
-        f"{platform.python_version()}, NumPy {np.__version__}",
+        f"{platform.python_version()}, NumPy {np.__version__}, {compiled_summary()}",
     )
 
 
