@@ -60,6 +60,9 @@ def test_compiled_cast_gives_the_numpy_votes_exactly():
         for a, b in zip(fast, slow, strict=True):
             np.testing.assert_array_equal(a, b)
             assert a.dtype == b.dtype
+    # Leaves without any vote slot (K = 0): no votes either way.
+    empty = JointVotes(joint=joint[:, :0], offset=offset[:, :0], weight=weight[:, :0], radius=0.2)
+    assert all(len(a) == 0 for a in empty.cast(points, leaves))
     with pytest.raises(ValueError, match="'leaves' argument of JointVotes.cast"):
         votes.cast(points, leaves[:, :-1])
     with pytest.raises(ValueError, match="'leaves' argument of JointVotes.cast"):

@@ -340,7 +340,7 @@ static PyObject *cast(PyObject *self, PyObject *args) {
     const Py_ssize_t n = b[0].len / 24, n_wanted = b[5].len;
     const Py_ssize_t n_trees = (b[1].ndim == 2) ? b[1].shape[0] : 0;
     const Py_ssize_t per_leaf = (b[2].ndim == 2) ? b[2].shape[1] : 0;
-    const Py_ssize_t n_leaves = per_leaf > 0 ? b[2].len / per_leaf : 0;
+    const Py_ssize_t n_leaves = (b[2].ndim == 2) ? b[2].shape[0] : 0;
     const Py_ssize_t capacity = n_trees * n * per_leaf;
     int ok = b[1].ndim == 2 && b[1].shape[1] == n && b[2].ndim == 2 &&
              b[3].len == 12 * n_leaves * per_leaf && b[4].len == 4 * n_leaves * per_leaf &&
