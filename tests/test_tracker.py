@@ -81,13 +81,78 @@ def test_tracks_a_synthetic_sequence(sequence):
 
 def test_limb_bones_keep_their_calibrated_lengths(sequence):
     """Temporal smoothing and fallbacks turn limb bones, never stretch them (BVH export)."""
-    tracker = PoseTracker(K, forest=LabelImages(sequence))
-    joints = np.array([r.joints for r in _run(tracker, sequence.frames[:40:2])])
-    calibrated = tracker.calibration.bone_lengths
+    tracker = PoseTracker(K, forest=LabelImages(sequence), calibration_frames=8)
+    tracker.process(sequence.frames[0])
+    joints, calibrated = [], []
+    for frame in sequence.frames[2:40:2]:
+        # Each frame is fitted with the bones measured up to the frame before it.
+        calibrated.append(tracker.calibration.bone_lengths)
+        joints.append(tracker.process(frame).joints)
+    joints, calibrated = np.array(joints), np.array(calibrated)
     for child in ("right_elbow", "left_hand", "right_knee", "left_foot", "right_hand"):
         i = JOINT_NAMES.index(child)
         lengths = np.linalg.norm(joints[:, i] - joints[:, JOINT_PARENTS[i]], axis=1)
-        np.testing.assert_allclose(lengths, calibrated[i], atol=1e-6)  # metres
+        np.testing.assert_allclose(lengths, calibrated[:, i], atol=1e-6)  # metres
+
+
+@pytest.mark.parametrize("frames", [1, 5])
+def test_limb_bones_are_measured_over_the_first_frames(sequence, frames):
+    """The median over ``calibration_frames`` frames, then fixed; 1 keeps the first frame's."""
+    from posedrift.tracking._init import LimbLengths
+
+    true = sequence.reference.joints[0]
+    tracker = PoseTracker(K, forest=LabelImages(sequence), calibration_frames=frames)
+    history = []
+    for frame in sequence.frames[:62:6]:  # the T-pose, then the arms come down
+        tracker.process(frame)
+        history.append(tracker.calibration.bone_lengths)
+    history = np.array(history)
+    assert isinstance(tracker._limb_lengths, LimbLengths) and tracker._limb_lengths.done
+    assert (history[frames - 1 :] == history[-1]).all()  # fixed afterwards
+    kinds = ("elbow", "hand", "knee", "foot")
+    limbs = [JOINT_NAMES.index(f"{s}_{j}") for s in ("right", "left") for j in kinds]
+    true_lengths = np.linalg.norm(true[limbs] - true[np.array(JOINT_PARENTS)[limbs]], axis=1)
+    # Ring joints sit on part boundaries, a few centimetres from the skeleton's joints.
+    np.testing.assert_allclose(history[-1, limbs], true_lengths, atol=0.035)  # metres
+    others = np.setdiff1d(np.arange(len(JOINT_NAMES)), limbs)
+    np.testing.assert_array_equal(history[-1, others], history[0, others])  # only the limbs
+
+
+def test_limb_lengths_take_the_median_and_stop(sequence):
+    from scipy.spatial import cKDTree
+
+    from posedrift.camera import backproject
+    from posedrift.labelling._relabel import geodesic_graph
+    from posedrift.points import downsample
+    from posedrift.skeleton import PART_NAMES
+    from posedrift.tracking._init import LimbLengths, calibrate
+
+    frame, truth = sequence.frames[0], sequence.reference.labels[0]  # the T-pose
+    full, pixels = backproject(frame.depth, K, truth > 0)
+    points = downsample(full, 400, rng=0)  # as the tracker does
+    _, nearest = cKDTree(full).query(points)
+    labels = truth[pixels[nearest, 0], pixels[nearest, 1]].astype(int) - 1
+    graph = geodesic_graph(points)
+    edges = (graph.rows, graph.cols)
+    cal = calibrate(points, labels, edges, height=1.75)
+    limbs = LimbLengths(2)
+    assert limbs.refine(cal) is cal  # nothing measured yet
+    limbs.add(points, labels, edges, 1.75)
+    np.testing.assert_allclose(limbs.refine(cal).bone_lengths, cal.bone_lengths)  # identity
+    # The hands 4 cm further out along the spread arms: the wrists' boundaries move
+    # about half as far, and the forearms measure about 2 cm longer.
+    hands = np.isin(labels, [PART_NAMES.index("right_hand"), PART_NAMES.index("left_hand")])
+    out = np.sign(points[hands, 0] - np.median(points[:, 0]))
+    longer = points.copy()
+    longer[hands, 0] += 0.04 * out
+    limbs.add(longer, labels, edges, 1.75)
+    limbs.add(points, labels, edges, 1.75)  # a third frame: ignored
+    assert limbs.done and limbs.seen == 2
+    hand = JOINT_NAMES.index("right_hand")
+    longer_by = limbs.refine(cal).bone_lengths[hand] - cal.bone_lengths[hand]
+    assert 0.005 < longer_by < 0.015  # metres: the median of +0 and about +2 cm
+    others = [JOINT_NAMES.index(j) for j in ("right_elbow", "left_knee", "right_foot")]
+    np.testing.assert_allclose(limbs.refine(cal).bone_lengths[others], cal.bone_lengths[others])
 
 
 def test_calibration_measures_where_the_shoulders_sit(sequence):

@@ -4,12 +4,15 @@ The paper calibrates on a T-pose (Section 3.3.1). Real recordings start with the
 arms relaxed, so any upright pose works here: the stature comes from the extent of
 the body along its trunk axis, each bone length from the distance between part
 boundaries where both ends are seen and plausible, and the anthropometric priors
-(``skeleton.SEGMENT_RATIOS``) fill in the rest, scaled to the person.
+(``skeleton.SEGMENT_RATIOS``) fill in the rest, scaled to the person. One frame's
+boundaries place a limb bone only to a few centimetres, so the tracker keeps
+measuring the limbs over its first frames (:class:`LimbLengths`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -184,14 +187,74 @@ def calibrate(
             break
         height = float(min(height * scale, 2.3))
         ratios = _limb_ratios(centres, counts, height)
+    bones = bone_lengths_from_ratios(height, ratios)
+    reach = prior_reach(height)
+    return Calibration(height=height, bone_lengths=bones, reach=reach, up=up)
+
+
+def bone_lengths_from_ratios(height: float, ratios: Mapping[str, float]) -> np.ndarray:
+    """Bone lengths ``(15,)``: the priors for ``height``, limb bones scaled by ``ratios``.
+
+    ``ratios`` maps a limb bone's child joint kind (``"hand"``, ``"foot"``,
+    ``"knee"``, ``"elbow"``) to its measured over expected length; a limb bone
+    measured on neither side takes the prior scaled like the others.
+    """
     bones = prior_bone_lengths(height)
-    # A limb bone measured on neither side takes the prior scaled like the others.
     scale = float(np.median(list(ratios.values()))) if ratios else 1.0
     for child in _LIMB_PARENTS:
         for side in ("right", "left"):
             bones[_J[f"{side}_{child}"]] *= ratios.get(child, scale)
-    reach = prior_reach(height)
-    return Calibration(height=height, bone_lengths=bones, reach=reach, up=up)
+    return bones
+
+
+class LimbLengths:
+    """Limb bone lengths measured over several frames: the median of each bone's ratios.
+
+    The first frame alone places each ring joint (a part boundary) to a few
+    centimetres: over the first second of the development clips one frame's
+    upper-arm, thigh and shank lengths spread by 2-5 cm. :meth:`add` measures
+    the limbs of one more labelled frame; :meth:`refine` gives the calibration
+    with each limb bone at the median of what was measured so far (stature and
+    everything else unchanged).
+
+    Parameters
+    ----------
+    frames : int
+        How many frames to measure; later calls of :meth:`add` are ignored.
+    """
+
+    def __init__(self, frames: int) -> None:
+        self.frames = int(frames)
+        self.seen = 0
+        self._ratios: dict[str, list[float]] = {child: [] for child in _LIMB_PARENTS}
+
+    @property
+    def done(self) -> bool:
+        """Whether ``frames`` frames have been measured."""
+        return self.seen >= self.frames
+
+    def add(
+        self,
+        points: np.ndarray,
+        labels: np.ndarray,
+        edges: tuple[np.ndarray, np.ndarray],
+        height: float,
+    ) -> None:
+        """Measure the limb bones seen at both ends in one labelled frame."""
+        if self.done:
+            return
+        self.seen += 1
+        centres, counts = part_boundaries(points, labels, *edges)
+        for child, ratio in _limb_ratios(centres, counts, height).items():
+            self._ratios[child].append(ratio)
+
+    def refine(self, calibration: Calibration) -> Calibration:
+        """``calibration`` with its limb bones at the median of the measured ratios."""
+        ratios = {c: float(np.median(r)) for c, r in self._ratios.items() if r}
+        if not ratios:
+            return calibration
+        bones = bone_lengths_from_ratios(calibration.height, ratios)
+        return replace(calibration, bone_lengths=bones)
 
 
 def label_template_points(

@@ -37,6 +37,7 @@ from posedrift.skeleton._meanshift import part_modes
 from posedrift.tracking._health import Health, assess
 from posedrift.tracking._init import (
     Calibration,
+    LimbLengths,
     calibrate,
     geometric_labels,
     label_template_points,
@@ -209,6 +210,10 @@ class PoseTracker:
         forest without votes, reports the skeleton from the labels alone.
     vote_bandwidth : float
         Mean-shift kernel width of the votes (metres).
+    calibration_frames : int
+        Frames, from the calibration on, over which the limb bones are measured:
+        each is the median of its lengths in those frames
+        (:class:`posedrift.tracking._init.LimbLengths`). 1 keeps the first frame's.
     rng : int or Generator
         Seeds downsampling and RANSAC (runs are repeatable for an int).
 
@@ -255,6 +260,7 @@ class PoseTracker:
         temporal_smoothing: float = 0.3,
         vote_weights: tuple[float, float] = (0.5, 0.4),
         vote_bandwidth: float = 0.05,
+        calibration_frames: int = 30,
         rng: int | np.random.Generator | None = 0,
     ) -> None:
         caller = "PoseTracker"
@@ -331,6 +337,14 @@ class PoseTracker:
             for w, name in zip(vote_weights, ("vote_weights[0]", "vote_weights[1]"), strict=True)
         )
         self.vote_bandwidth = check_scalar(vote_bandwidth, "vote_bandwidth", low=0.0, caller=caller)
+        self.calibration_frames = check_scalar(
+            calibration_frames,
+            "calibration_frames",
+            low=1,
+            include_low=True,
+            integer=True,
+            caller=caller,
+        )
         self._frame_votes: tuple[np.ndarray, ...] | None = None
         self.relabel = bool(relabel)
         self.registration = registration
@@ -363,6 +377,8 @@ class PoseTracker:
         self._last_centre: np.ndarray | None = None
         self._state: _State | None = None
         self._calibration: Calibration | None = None
+        self._limb_lengths: LimbLengths | None = None
+        self._measured_calibration: Calibration | None = None
         self._voxel: float | None = None
         self._person_depth: float | None = None
         self._floor: tuple[np.ndarray, float] | None = None
@@ -499,6 +515,7 @@ class PoseTracker:
             joints=fit.joints,
             registration=attempt.registration,
         )
+        self._measure_limbs(points, attempt.labels, graph)
         # The votes refine what is reported, not the track: fed back as the next
         # frame's prediction, a refined arm could lock in a wrong pose (docs/RESULTS.md).
         t_votes = time.perf_counter()
@@ -516,6 +533,19 @@ class PoseTracker:
             timings_ms=timings,
             message=message,
         )
+
+    def _measure_limbs(self, points, labels, graph) -> None:
+        """Measure the limb bones in this frame while the calibration is recent."""
+        if self._calibration is None:  # this frame's pose was not good enough to calibrate
+            return
+        if self._calibration is not self._measured_calibration:
+            # Calibrated afresh (the only other source of a new Calibration): start over.
+            self._limb_lengths = LimbLengths(self.calibration_frames)
+        if not self._limb_lengths.done:
+            height = self._calibration.height
+            self._limb_lengths.add(points, labels, (graph.rows, graph.cols), height)
+            self._calibration = self._limb_lengths.refine(self._calibration)
+        self._measured_calibration = self._calibration
 
     def _working_frame(self, frame: DepthFrame) -> DepthFrame:
         """The frame subsampled by the decimation factor (as it is where that is 1)."""
