@@ -345,6 +345,15 @@ def test_real_utd_sequence(utd_dir):
 # -- RealSense --------------------------------------------------------------------------------
 
 
+def _need_realsense():
+    """Skip where pyrealsense2 is absent or cannot load (its wheel needs libusb-1.0)."""
+    return pytest.importorskip(
+        "pyrealsense2",
+        reason="pyrealsense2 is not installed or cannot load (apt-get install libusb-1.0-0)",
+        exc_type=ImportError,
+    )
+
+
 _RECORDER = """\
 import sys, time
 import numpy as np
@@ -402,7 +411,7 @@ def _record(path: Path, stack: np.ndarray, *, stream: str = "depth") -> None:
     tears down its threads on a loaded machine, which must not take the test run with
     it. A crashed recording (killed by a signal) is retried twice.
     """
-    pytest.importorskip("pyrealsense2")
+    _need_realsense()
     frames = path.with_suffix(".npy")
     np.save(frames, stack)
     for _attempt in range(3):
@@ -420,7 +429,7 @@ def _record(path: Path, stack: np.ndarray, *, stream: str = "depth") -> None:
 
 
 def test_realsense_recording_round_trip(tmp_path):
-    pytest.importorskip("pyrealsense2")
+    _need_realsense()
     stack = np.zeros((5, 48, 64), np.uint16)
     for i in range(5):
         stack[i, 10:40, 20 + i : 40 + i] = 2800 + 10 * i
@@ -443,14 +452,28 @@ def test_realsense_recording_round_trip(tmp_path):
 
 
 def test_realsense_without_depth_stream(tmp_path):
-    pytest.importorskip("pyrealsense2")
+    _need_realsense()
     _record(tmp_path / "colour.db3", np.zeros((3, 48, 64), np.uint8), stream="color")
     with pytest.raises(ValueError, match=r"colour\.db3' has no depth stream. Streams found: color"):
         open_depth_source(tmp_path / "colour.db3")
 
 
+def test_realsense_that_cannot_load_says_why(tmp_path, monkeypatch):
+    """pyrealsense2 installed without its system library: the error says what to install."""
+    fake = tmp_path / "site" / "pyrealsense2"
+    fake.mkdir(parents=True)
+    (fake / "__init__.py").write_text(
+        "raise ImportError('libusb-1.0.so.0: cannot open shared object file')\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path / "site"))
+    monkeypatch.delitem(sys.modules, "pyrealsense2", raising=False)
+    (tmp_path / "rec.bag").write_bytes(b"")
+    with pytest.raises(ImportError, match=r"cannot load \(libusb.*apt-get install libusb-1.0-0"):
+        open_depth_source(tmp_path / "rec.bag")
+
+
 def test_realsense_unplayable_bag_names_the_file(tmp_path):
-    pytest.importorskip("pyrealsense2")
+    _need_realsense()
     (tmp_path / "broken.bag").write_bytes(b"#ROSBAG V2.0\nnot really")
     with pytest.raises(ValueError, match=r"Cannot play back the RealSense recording .*broken\.bag"):
         open_depth_source(tmp_path / "broken.bag")
@@ -477,7 +500,7 @@ os.abort()
 
 def test_realsense_playback_that_dies_keeps_its_frames(tmp_path, monkeypatch):
     """librealsense aborting mid-recording costs only the frames it had not delivered."""
-    pytest.importorskip("pyrealsense2")
+    _need_realsense()
     from posedrift.io import _realsense
 
     def dying(path, mode):

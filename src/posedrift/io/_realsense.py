@@ -36,9 +36,14 @@ _WAIT_MS = 2000
 def _import_realsense():
     try:
         import pyrealsense2 as rs
-    except ImportError as exc:
+    except ModuleNotFoundError as exc:
         raise ImportError(
             "Reading RealSense recordings needs pyrealsense2: pip install 'posedrift[realsense]'."
+        ) from exc
+    except ImportError as exc:  # installed, but a system library it links to is missing
+        raise ImportError(
+            f"pyrealsense2 is installed but cannot load ({exc}). Its wheel needs libusb-1.0: "
+            "on Debian or Ubuntu, apt-get install libusb-1.0-0."
         ) from exc
     return rs
 
