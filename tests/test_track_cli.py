@@ -300,3 +300,23 @@ def test_track_height_option_sets_the_stature(tmp_path):
     assert widths["2.0"] / widths["1.5"] == pytest.approx(2.0 / 1.5, rel=1e-6)
     bad = runner.invoke(app, ["track", str(tmp_path / "d.npy"), "--out", "x", "--height", "9"])
     assert bad.exit_code == 2 and "--height" in bad.output
+
+
+def test_millimetres_read_as_metres_get_a_hint(tmp_path):
+    """A float stack in millimetres: view and track say to give --depth-scale."""
+    stack = np.zeros((2, 240, 320), np.float32)
+    stack[:, 60:200, 130:190] = 2800.0  # a person-sized block, in millimetres
+    path = tmp_path / "mm.npy"
+    np.save(path, stack)
+    view = runner.invoke(app, ["-q", "view", str(path)])
+    assert view.exit_code == 0, view.output
+    assert "depths of 2800 m look like raw sensor units" in view.output
+    assert "--depth-scale (1000 for millimetres)" in view.output
+    out = tmp_path / "out"
+    track = runner.invoke(app, ["-q", "track", str(path), "--out", str(out), "--no-video"])
+    assert "no pose recovered" in track.output
+    assert "its depths of 2800 m look like raw sensor units" in track.output
+    # given the scale, the same stack reads as a plausible 2.8 m and gets no hint
+    view = runner.invoke(app, ["-q", "view", str(path), "--depth-scale", "1000"])
+    assert "2.800 - 2.800 m" in view.output
+    assert "raw sensor units" not in view.output

@@ -8,6 +8,10 @@ import numpy as np
 
 from posedrift.camera._intrinsics import Intrinsics
 
+MAX_PERSON_DEPTH = 20.0
+"""Metres. No depth camera sees a person further away: larger depths are raw sensor
+units (millimetres, say) read as metres."""
+
 
 @dataclass(frozen=True)
 class DepthFrame:

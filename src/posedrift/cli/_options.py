@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 
 from posedrift.camera import CAMERA_PRESETS
@@ -40,3 +41,15 @@ UnmirrorOption = Annotated[
         help="Flip mirrored recordings left-right (default: only UTD-MHAD .mat files).",
     ),
 ]
+
+
+def depth_scale_hint(depth_m: float) -> str:
+    """A hint where depths (metres, as read) are too far for a person, else ""."""
+    from posedrift.camera._frame import MAX_PERSON_DEPTH
+
+    if not (np.isfinite(depth_m) and depth_m > MAX_PERSON_DEPTH):
+        return ""
+    return (
+        f"depths of {depth_m:g} m look like raw sensor units read as metres: "
+        f"give --depth-scale (1000 for millimetres)"
+    )

@@ -18,6 +18,7 @@ from posedrift.cli._options import (
     FpsOption,
     IntrinsicsOption,
     UnmirrorOption,
+    depth_scale_hint,
 )
 
 EXIT_UNREADABLE_FRAMES = 1
@@ -121,6 +122,7 @@ def track(
     frames: list = []
     unreadable = 0
     with_depth = 0  # frames with at least one valid (positive, finite) depth pixel
+    first_depth = np.nan  # median depth of the first of them (metres, as read)
     seconds = 0.0
     written: dict = {}
     interrupted = False
@@ -136,6 +138,8 @@ def track(
                     results.append(FrameResult.empty(item.index, FrameStatus.LOST, message))
                     frames.append(None)
                 else:
+                    if not with_depth and np.any(item.depth > 0):
+                        first_depth = float(np.median(item.depth[item.depth > 0]))
                     with_depth += bool(np.any(item.depth > 0))
                     start = time.perf_counter()
                     results.append(tracker.process(item))
@@ -165,7 +169,13 @@ def track(
                 written["points"] = write_point_clouds(results, out / "points", fmt=point_clouds)
     _summary(results, seconds, written)
     if results and not interrupted:
-        _no_pose_warning(results, unreadable=unreadable, with_depth=with_depth, source=source)
+        _no_pose_warning(
+            results,
+            unreadable=unreadable,
+            with_depth=with_depth,
+            source=source,
+            first_depth=first_depth,
+        )
     if interrupted:
         n = len(results)
         typer.echo(
@@ -182,7 +192,9 @@ def track(
         raise typer.Exit(EXIT_UNREADABLE_FRAMES)
 
 
-def _no_pose_warning(results: list, *, unreadable: int, with_depth: int, source: Path) -> None:
+def _no_pose_warning(
+    results: list, *, unreadable: int, with_depth: int, source: Path, first_depth: float
+) -> None:
     """Say plainly when no frame of the input gave a pose, and the likely reason."""
     from posedrift.tracking import FrameStatus
 
@@ -198,6 +210,8 @@ def _no_pose_warning(results: list, *, unreadable: int, with_depth: int, source:
         )
     else:
         reason = f"no person was found (or posed) in any of the {n} frames of {source}"
+        if hint := depth_scale_hint(first_depth):
+            reason += f"; its {hint}"
     typer.echo(f"warning: no pose recovered: {reason}.", err=True)
 
 

@@ -16,6 +16,7 @@ from posedrift.cli._options import (
     FpsOption,
     IntrinsicsOption,
     UnmirrorOption,
+    depth_scale_hint,
 )
 
 EXIT_OK = 0
@@ -119,6 +120,8 @@ def view(
         )
     elif coverage:
         typer.echo("range      none: no pixel of any frame has depth")
+    if hint := depth_scale_hint(nearest):
+        typer.echo(f"warning: {hint}.", err=True)
     for frame in bad[:20]:
         typer.echo(f"unreadable {frame}", err=True)
     if len(bad) > 20:

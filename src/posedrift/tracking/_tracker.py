@@ -23,6 +23,7 @@ import numpy as np
 
 from posedrift._validation import check_rng, check_scalar
 from posedrift.camera import DepthFrame, Intrinsics, backproject, project
+from posedrift.camera._frame import MAX_PERSON_DEPTH
 from posedrift.labelling._relabel import geodesic_graph, relabel
 from posedrift.points._downsample import downsample
 from posedrift.points._segment import BackgroundModel, segment_person
@@ -102,7 +103,7 @@ def _icp(source: np.ndarray, target: np.ndarray, iterations: int = 10):
 def _units_hint(depth: np.ndarray) -> str:
     """A hint when a frame's depth looks like millimetres given as metres, else ""."""
     valid = depth[np.isfinite(depth) & (depth > 0)]
-    if valid.size == 0 or np.median(valid) <= 20.0:  # metres: nobody stands 20 m away
+    if valid.size == 0 or np.median(valid) <= MAX_PERSON_DEPTH:
         return ""
     return (
         f"; its median depth is {np.median(valid):g} m: raw sensor units given as metres? "
