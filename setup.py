@@ -2,9 +2,9 @@
 ``posedrift.labelling._ckernels``, ``posedrift.skeleton._cmeanshift``).
 
 Metadata lives in ``pyproject.toml``; this file only declares the C extensions (CPD's
-fused E-step in float64 and float32 and its low-rank M-step; relabelling's Dijkstra, the
-forest's per-point descent and its joint votes' casting; the grouped mean shift of the
-part modes and the votes). They use the plain buffer protocol (no NumPy C API), so NumPy
+fused E-step in float64 and float32, its low-rank M-step and its label transfer;
+relabelling's Dijkstra, the forest's per-point descent and its joint votes' casting; the
+grouped mean shift of the part modes and the votes). They use the plain buffer protocol (no NumPy C API), so NumPy
 is not a build requirement. Each is optional: when one cannot be compiled the install
 still succeeds and posedrift falls back to its NumPy twins.
 """

@@ -302,6 +302,33 @@ def test_compiled_estep_sums_and_kept_sort_order():
         _estep._cestep.estep(x, t, 300, 250, 3, 0.01, 1e-4, 0.0, False, *got[:3], order[:5])
 
 
+@pytest.mark.skipif(not _estep.has_compiled_kernel(), reason="compiled E-step not built")
+@pytest.mark.parametrize("d", [2, 3, 4])
+def test_compiled_label_mass_matches_numpy_twin(d):
+    rng = np.random.default_rng(d)
+    x = rng.normal(size=(210, d))
+    t = rng.normal(size=(190, d))
+    labels = rng.integers(0, 15, 190)
+    labels[labels == 7] = 6  # a label no source point carries
+    for sigma2, c in [(1.0, 0.0), (0.05, 0.01), (1e-3, 1e-6)]:
+        ref = _estep.posterior_label_mass(x, t, sigma2, c, labels, 15, compiled=False)
+        got = _estep.posterior_label_mass(x, t, sigma2, c, labels, 15)
+        np.testing.assert_allclose(got, ref, atol=1e-12, rtol=1e-10)
+        assert np.all(got[:, 7] == 0)
+    # identity: each point's own label takes nearly all of its mass
+    own = _estep.posterior_label_mass(t, t, 1e-6, 0.0, labels, 15)
+    np.testing.assert_allclose(own[np.arange(190), labels], 1.0, atol=1e-9)
+    # far from every source point with no outlier term: exponents clamped, never NaN
+    far = _estep.posterior_label_mass(x + 1e3, t, 1e-3, 0.0, labels, 15)
+    twin = _estep.posterior_label_mass(x + 1e3, t, 1e-3, 0.0, labels, 15, compiled=False)
+    np.testing.assert_allclose(far, twin, rtol=1e-12)
+    np.testing.assert_allclose(far.sum(axis=1), 1.0)
+    with pytest.raises(ValueError, match=r"labels must lie in \[0, 15\)"):
+        _estep._cestep.label_mass(x, t, 210, 190, d, 1.0, 0.0, labels + 1, 15, np.empty((210, 15)))
+    with pytest.raises(ValueError, match="buffer 'out'"):
+        _estep._cestep.label_mass(x, t, 210, 190, d, 1.0, 0.0, labels, 15, np.empty((210, 14)))
+
+
 def test_numpy_estep_blocks_agree(monkeypatch):
     rng = np.random.default_rng(0)
     x, t = rng.normal(size=(300, 3)), rng.normal(size=(50, 3))

@@ -243,10 +243,32 @@ def posterior_label_mass(
     c: float,
     labels: np.ndarray,
     n_labels: int,
+    *,
+    compiled: bool = True,
 ) -> np.ndarray:
-    """``(N, n_labels)``: posterior mass of each label's source points, per target point."""
-    n = target.shape[0]
+    """``(N, n_labels)``: posterior mass of each label's source points, per target point.
+
+    The compiled kernel when built (``compiled=True``: its exponential vectorized for
+    the processor at run time, where NumPy's float64 ``exp`` is scalar on processors
+    without AVX-512), else the blocked NumPy twin; they agree to about 1e-15.
+    """
+    n, d = target.shape
     m = moved.shape[0]
+    if compiled and _cestep is not None and hasattr(_cestep, "label_mass"):
+        out = np.empty((n, n_labels))
+        _cestep.label_mass(
+            np.ascontiguousarray(target, dtype=np.float64),
+            np.ascontiguousarray(moved, dtype=np.float64),
+            n,
+            m,
+            d,
+            float(sigma2),
+            float(c),
+            np.ascontiguousarray(labels, dtype=np.int64),
+            int(n_labels),
+            out,
+        )
+        return out
     onehot = np.zeros((m, n_labels))
     onehot[np.arange(m), labels] = 1.0
     out = np.empty((n, n_labels))
