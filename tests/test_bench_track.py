@@ -25,6 +25,7 @@ def test_cli_bench_track_writes_table_and_json(tmp_path):
     assert data["n_points"] == 400 and data["sequences"] == ["builtin"]
     assert data["stage_clock"] == "cpu"  # the stage timings were taken in CPU time
     assert "compiled kernels:" in data["machine"] and "machine:" in result.output
+    assert any(level in data["machine"] for level in ("AVX-512", "AVX2", "NEON", "SIMD"))
     import time
 
     from posedrift.tracking import _tracker

@@ -402,9 +402,25 @@ def bench_track(
         camera=_camera_text(sequences[0]) + (f", {scene}" if scene else ""),
         stage_clock=clock,
         threads=threads,
-        machine=f"{platform.processor() or platform.machine()}, Python "
+        machine=f"{platform.processor() or platform.machine()} ({simd_level()}), Python "
         f"{platform.python_version()}, NumPy {np.__version__}, {compiled_summary()}",
     )
+
+
+def simd_level() -> str:
+    """The widest vector instructions NumPy found on this processor ("AVX-512", "AVX2"...).
+
+    Speed depends on it more than on the clock: NumPy's float64 ``exp`` and the
+    compiled kernels' clones are vectorized for AVX-512 or AVX2 (docs/RESULTS.md).
+    """
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as features
+    except ImportError:  # NumPy moved its private table: say so rather than guess
+        return "SIMD unknown"
+    for name, label in (("AVX512F", "AVX-512"), ("AVX2", "AVX2"), ("ASIMD", "NEON")):
+        if features.get(name):
+            return label
+    return "no AVX2"
 
 
 def _camera_text(sequence) -> str:

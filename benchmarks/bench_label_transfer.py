@@ -1,0 +1,60 @@
+"""The tracker's label transfer: the compiled kernel against its NumPy twin, one core.
+
+Each frame the tracker carries its labels over by CPD's posterior: for each of the
+frame's points, the posterior mass of each part's template points
+(``posterior_label_mass``), about 400 x 400 kernel values. The NumPy twin spends most of
+its time in float64 ``exp``, which NumPy vectorizes only with AVX-512; the compiled
+kernel has its own vectorized exponential, cloned for AVX-512, AVX2 with FMA and
+plain x86-64. This prints the median milliseconds of each, and of NumPy's ``exp`` on
+the same number of values in float64 and float32, with the processor's vector level.
+
+Usage: OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/bench_label_transfer.py
+"""
+
+from __future__ import annotations
+
+import timeit
+
+import numpy as np
+
+from posedrift.benchmarks._track import simd_level
+from posedrift.registration import _estep
+
+
+def median_ms(fn, number: int = 50, repeat: int = 7) -> float:
+    return 1e3 * float(np.median(timeit.repeat(fn, number=number, repeat=repeat))) / number
+
+
+def main(points: int = 400, sigma2: float = 4e-4, outlier: float = 0.01) -> None:
+    rng = np.random.default_rng(0)
+    target = 0.3 * rng.normal(size=(points, 3))  # metres, about a body's spread
+    moved = target + 0.01 * rng.normal(size=(points, 3))
+    labels = rng.integers(0, 15, points)
+    compiled = _estep.posterior_label_mass(target, moved, sigma2, outlier, labels, 15)
+    twin = _estep.posterior_label_mass(target, moved, sigma2, outlier, labels, 15, compiled=False)
+    values = -50.0 * rng.random((points, points))
+    values32 = values.astype(np.float32)
+    print(
+        f"{points} x {points} points, {simd_level()}, compiled kernel built: "
+        f"{_estep.has_compiled_kernel()}; largest difference {np.abs(compiled - twin).max():.1e}"
+    )
+    print("| what | ms |\n|---|---:|")
+    for name, fn in [
+        (
+            "label transfer, compiled",
+            lambda: _estep.posterior_label_mass(target, moved, sigma2, outlier, labels, 15),
+        ),
+        (
+            "label transfer, NumPy twin",
+            lambda: _estep.posterior_label_mass(
+                target, moved, sigma2, outlier, labels, 15, compiled=False
+            ),
+        ),
+        ("np.exp, float64", lambda: np.exp(values)),
+        ("np.exp, float32", lambda: np.exp(values32)),
+    ]:
+        print(f"| {name} | {median_ms(fn):.3f} |")
+
+
+if __name__ == "__main__":
+    main()
