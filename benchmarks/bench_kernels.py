@@ -1,14 +1,15 @@
-"""The tracker's label transfer: the compiled kernel against its NumPy twin, one core.
+"""The tracker's compiled CPD kernels against their NumPy twins, one core.
 
 Each frame the tracker carries its labels over by CPD's posterior: for each of the
 frame's points, the posterior mass of each part's template points
 (``posterior_label_mass``), about 400 x 400 kernel values. The NumPy twin spends most of
 its time in float64 ``exp``, which NumPy vectorizes only with AVX-512; the compiled
 kernel has its own vectorized exponential, cloned for AVX-512, AVX2 with FMA and
-plain x86-64. This prints the median milliseconds of each, and of NumPy's ``exp`` on
-the same number of values in float64 and float32, with the processor's vector level.
+plain x86-64. This prints the median milliseconds of each, of the E-step (float64 and
+float32) beside them, and of NumPy's ``exp`` on the same number of values in float64 and
+float32, with the processor's vector level.
 
-Usage: OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/bench_label_transfer.py
+Usage: OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/bench_kernels.py
 """
 
 from __future__ import annotations
@@ -49,6 +50,15 @@ def main(points: int = 400, sigma2: float = 4e-4, outlier: float = 0.01) -> None
             lambda: _estep.posterior_label_mass(
                 target, moved, sigma2, outlier, labels, 15, compiled=False
             ),
+        ),
+        ("E-step, compiled, float64", lambda: _estep.estep_stats(target, moved, sigma2, outlier)),
+        (
+            "E-step, compiled, float32",
+            lambda: _estep.estep_stats(target, moved, sigma2, outlier, single=True),
+        ),
+        (
+            "E-step, NumPy twin, float64",
+            lambda: _estep.estep_stats(target, moved, sigma2, outlier, compiled=False),
         ),
         ("np.exp, float64", lambda: np.exp(values)),
         ("np.exp, float32", lambda: np.exp(values32)),
