@@ -138,9 +138,10 @@ def track(
                     results.append(FrameResult.empty(item.index, FrameStatus.LOST, message))
                     frames.append(None)
                 else:
-                    if not with_depth and np.any(item.depth > 0):
+                    has_depth = bool(np.any(item.depth > 0))
+                    if has_depth and not with_depth:
                         first_depth = float(np.median(item.depth[item.depth > 0]))
-                    with_depth += bool(np.any(item.depth > 0))
+                    with_depth += has_depth
                     start = time.perf_counter()
                     results.append(tracker.process(item))
                     seconds += time.perf_counter() - start
