@@ -172,6 +172,21 @@ static inline void window(const void *axv, int single, Py_ssize_t m, double xa, 
         }                                                                             \
     } while (0)
 
+/* row[j] = |x - m_j|^2 over the n columns of mt (D rows, `stride` apart), one dimension at
+ * a time: the general-D path of the float64 kernels. */
+static inline void squared_distances(const double *xd, const double *mt, Py_ssize_t stride,
+                                     Py_ssize_t n, Py_ssize_t d, double *row) {
+    for (Py_ssize_t j = 0; j < n; ++j) row[j] = 0.0;
+    for (Py_ssize_t kk = 0; kk < d; ++kk) {
+        const double xk = xd[kk];
+        const double *mk = mt + kk * stride;
+        for (Py_ssize_t j = 0; j < n; ++j) {
+            double e = xk - mk[j];
+            row[j] += e * e;
+        }
+    }
+}
+
 /* x (N, D) float64; mt (D, M) sorted source, transposed; p1 (M), pxt (D, M) zeroed. */
 MULTIVERSION
 static double kernel_f64(const double *x, const double *mt, Py_ssize_t n, Py_ssize_t m_all,
@@ -208,15 +223,7 @@ static double kernel_f64(const double *x, const double *mt, Py_ssize_t n, Py_ssi
                 s += k;
             }
         } else {
-            for (Py_ssize_t j = 0; j < mw_n; ++j) row[j] = 0.0;
-            for (Py_ssize_t kk = 0; kk < d; ++kk) {
-                const double xk = xd[kk];
-                const double *mk = mw + kk * m_all;
-                for (Py_ssize_t j = 0; j < mw_n; ++j) {
-                    double e = xk - mk[j];
-                    row[j] += e * e;
-                }
-            }
+            squared_distances(xd, mw, m_all, mw_n, d, row);
 #pragma omp simd reduction(+ : s)
             for (Py_ssize_t j = 0; j < mw_n; ++j) {
                 double z = a * row[j];
@@ -314,17 +321,7 @@ static void label_mass_f64(const double *x, const double *mt, Py_ssize_t n, Py_s
     const double tiny = 2.2250738585072014e-308;
     for (Py_ssize_t i = 0; i < n; ++i) {
         const double *xd = x + i * d;
-        if (d != 3) { /* squared distances first, one dimension at a time */
-            for (Py_ssize_t j = 0; j < m; ++j) row[j] = 0.0;
-            for (Py_ssize_t kk = 0; kk < d; ++kk) {
-                const double xk = xd[kk];
-                const double *mk = mt + kk * m;
-                for (Py_ssize_t j = 0; j < m; ++j) {
-                    double e = xk - mk[j];
-                    row[j] += e * e;
-                }
-            }
-        }
+        if (d != 3) squared_distances(xd, mt, m, m, d, row);
         double *o = out + i * n_labels;
         double s = 0.0;
         for (Py_ssize_t l = 0; l < n_labels; ++l) {
