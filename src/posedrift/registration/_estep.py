@@ -255,9 +255,10 @@ def posterior_label_mass(
     """
     n, d = target.shape
     m = moved.shape[0]
-    if compiled and _cestep is not None and hasattr(_cestep, "label_mass"):
+    kernel = getattr(_cestep, "label_mass", None) if compiled else None
+    if kernel is not None and n and m and sigma2 > 0:  # (the twin covers the edge cases)
         out = np.empty((n, n_labels))
-        _cestep.label_mass(
+        kernel(
             np.ascontiguousarray(target, dtype=np.float64),
             np.ascontiguousarray(moved, dtype=np.float64),
             n,
