@@ -1,10 +1,12 @@
 """Build the optional compiled kernels (``posedrift.registration._cestep``,
-``posedrift.labelling._ckernels``, ``posedrift.skeleton._cmeanshift``).
+``posedrift.labelling._ckernels``, ``posedrift.skeleton._cmeanshift``,
+``posedrift.points._csegment``).
 
 Metadata lives in ``pyproject.toml``; this file only declares the C extensions (CPD's
 fused E-step in float64 and float32, its low-rank M-step and its label transfer;
-relabelling's Dijkstra, the forest's per-point descent and its joint votes' casting; the
-grouped mean shift of the part modes and the votes). They use the plain buffer protocol (no NumPy C API), so NumPy
+relabelling's k-NN graph and Dijkstra, the forest's per-point descent and its joint votes'
+casting; the grouped mean shift of the part modes and the votes; the segmentation's
+connected components). They use the plain buffer protocol (no NumPy C API), so NumPy
 is not a build requirement. Each is optional: when one cannot be compiled the install
 still succeeds and posedrift falls back to its NumPy twins.
 """
@@ -26,11 +28,18 @@ setup(
             ],
             optional=True,
         ),
-        # Relabelling's Dijkstra and the forest's per-point descent. Plain -O3: the
+        # Relabelling's k-NN graph and Dijkstra, the forest's descent. Plain -O3: the
         # code relies on infinities, which -ffinite-math-only would break.
         Extension(
             "posedrift.labelling._ckernels",
             sources=["src/posedrift/labelling/_ckernels.c"],
+            extra_compile_args=["-O3"],
+            optional=True,
+        ),
+        # The segmentation's connected components. Plain -O3: float32 compared as NumPy does.
+        Extension(
+            "posedrift.points._csegment",
+            sources=["src/posedrift/points/_csegment.c"],
             extra_compile_args=["-O3"],
             optional=True,
         ),

@@ -234,13 +234,70 @@ def _clouds():
 @pytest.mark.parametrize("options", [{}, {"k": 3, "max_edge": 0.05}, {"depth_step": None}])
 def test_graph_equals_the_reference(options):
     for pts in _clouds():
-        graph = geodesic_graph(pts, **options)
+        graph = geodesic_graph(pts, compiled=False, **options)
         lo, hi, lengths, spacing, matrix = _reference_graph(pts, **options)
         assert np.array_equal(graph.rows, lo) and np.array_equal(graph.cols, hi)
         assert np.array_equal(graph.lengths, lengths) and graph.spacing == spacing
         assert np.array_equal(graph.matrix.indptr, matrix.indptr)
         assert np.array_equal(graph.matrix.indices, matrix.indices)
         assert np.array_equal(graph.matrix.data, matrix.data)
+
+
+def _same_graph(a, b):
+    return (
+        np.array_equal(a.rows, b.rows)
+        and np.array_equal(a.cols, b.cols)
+        and a.rows.dtype == b.rows.dtype == a.cols.dtype == b.cols.dtype == np.int64
+        and np.array_equal(a.lengths, b.lengths)
+        and a.spacing == b.spacing
+        and np.array_equal(a.matrix.indptr, b.matrix.indptr)
+        and np.array_equal(a.matrix.indices, b.matrix.indices)
+        and np.array_equal(a.matrix.data, b.matrix.data)
+    )
+
+
+@pytest.mark.parametrize("options", [{}, {"k": 3, "max_edge": 0.05}, {"depth_step": None}])
+def test_compiled_graph_matches_its_twin(options):
+    """The compiled k-NN and CSR kernels give the twin's graph, bit for bit, wherever no
+    two neighbours tie in distance (then either may be taken: the distances agree)."""
+    from scipy.spatial import cKDTree
+
+    from posedrift.labelling import _relabel
+
+    if _relabel._ckernels is None:
+        pytest.skip("the compiled kernels are not built (no C compiler at install)")
+    rng = np.random.default_rng(11)
+    clouds = list(_clouds())
+    lattice = clouds.pop()  # equal spacings: ties everywhere
+    clouds += [rng.normal(size=(n, 3)) * rng.uniform(0.01, 2.0, size=3) for n in (2, 3, 9, 700)]
+    clouds.append(np.vstack([clouds[-1], clouds[-1][:50] + 1e-13]))  # near-duplicates
+    clouds.append(np.full((4, 3), 2.0) + [[0, 0, 0], [0.1, 0, 0], [0, 0.2, 0], [0, 0, 0.4]])
+    for pts in clouds:
+        compiled = geodesic_graph(pts, **options)
+        twin = geodesic_graph(pts, compiled=False, **options)
+        assert _same_graph(compiled, twin)
+    for pts in (lattice, np.round(rng.normal(size=(300, 3)) * 4) / 4):
+        for k in (1, 6, 12):
+            kk = min(k + 1, len(pts))
+            dist, idx = _relabel._neighbours(pts, kk, compiled=True)
+            ref = cKDTree(pts).query(pts, k=kk)[0].reshape(len(pts), kk)
+            assert np.array_equal(dist, ref)
+            own = np.linalg.norm(pts[idx] - pts[:, None], axis=2)
+            assert np.allclose(own, dist, rtol=0, atol=1e-12)
+        graph = geodesic_graph(pts, **options)
+        assert np.array_equal(graph.matrix.toarray(), graph.matrix.toarray().T)
+        assert (graph.rows < graph.cols).all()
+    # More neighbours than points: missing ones are infinitely far, index n (as cKDTree).
+    dist, idx = _relabel._neighbours(np.eye(3), 5, compiled=True)
+    assert np.isinf(dist[:, 3:]).all() and (idx[:, 3:] == 3).all()
+
+
+def test_duplicate_points_make_no_self_loops():
+    pts = np.array([[0.0, 0, 2], [0.0, 0, 2], [0.02, 0, 2], [0.04, 0, 2]])
+    for compiled in (True, False):
+        graph = geodesic_graph(pts, k=3, compiled=compiled)
+        assert (graph.rows != graph.cols).all() and graph.matrix.diagonal().sum() == 0
+        assert graph.matrix[0, 1] == pytest.approx(1e-9)  # the duplicates stay joined
 
 
 def _anchor_sets(pts, rng):

@@ -317,6 +317,37 @@ def test_segment_equals_the_reference(varied_frames):
         )
 
 
+def test_compiled_components_match_the_numpy_twin(varied_frames):
+    from posedrift.points import _segment
+
+    if _segment._csegment is None:
+        pytest.skip("the compiled segmentation kernel is not built (no C compiler at install)")
+    rng = np.random.default_rng(2)
+    cases = []
+    for frame in varied_frames:
+        depth = np.nan_to_num(frame.depth).astype(np.float32)
+        cases.append((segment_person(frame), depth))
+        cases.append(((depth > 0.4) & (depth < 6.0), depth))
+    # Steps at the threshold in float32 (1.0 -> 1.15 is 0.14999998), ties, single pixels.
+    levels = np.array([1.0, 1.15, 1.3, 1.0000001, 2.0], dtype=np.float32)
+    for shape in [(1, 1), (1, 7), (7, 1), (13, 17), (40, 31)]:
+        for _ in range(20):
+            mask = rng.random(shape) < rng.uniform(0.2, 0.95)
+            cases.append((mask, rng.choice(levels, size=shape)))
+    for mask, depth in cases:
+        got, n_got = _segment._components(mask, depth, 0.15)
+        ref, n_ref = _segment._components(mask, depth, 0.15, compiled=False)
+        assert n_got == n_ref and got.dtype == ref.dtype and np.array_equal(got, ref)
+    # Identity: one flat blob is one component; a step splits it at the farther side.
+    depth = np.full((6, 8), 2.0, dtype=np.float32)
+    mask = np.ones((6, 8), dtype=bool)
+    labels, n = _segment._components(mask, depth, 0.15)
+    assert n == 1 and (labels == 1).all()
+    depth[:, 4:] = 2.5
+    labels, n = _segment._components(mask, depth, 0.15)
+    assert n == 2 and (labels[:, :4] == 1).all() and (labels[:, 4] == 0).all()
+
+
 def test_morphology_kernels_equal_scipy():
     from scipy import ndimage
 

@@ -8,6 +8,7 @@ KERNELS = (
     "posedrift.registration._cestep",
     "posedrift.labelling._ckernels",
     "posedrift.skeleton._cmeanshift",
+    "posedrift.points._csegment",
 )
 """The C extensions; each has a NumPy twin that runs where it was not built."""
 
@@ -41,7 +42,7 @@ def compiled_kernels() -> dict[str, bool]:
 
 
 def compiled_summary() -> str:
-    """``"compiled kernels: all 3"``, or which are missing (for benchmark reports)."""
+    """``"compiled kernels: all 4"``, or which are missing (for benchmark reports)."""
     have = compiled_kernels()
     missing = [name.removeprefix("posedrift.") for name, ok in have.items() if not ok]
     if not missing:

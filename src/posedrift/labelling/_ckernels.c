@@ -36,7 +36,28 @@
  *   where, joint_out, weight_out : (T * N * K, 3) float64, (T * N * K,) int64 and float64,
  *             written in their first M rows: point + offset, the joint, weight / T
  *
- * The twins are scipy's dijkstra, the NumPy descent and JointVotes.cast's NumPy path; tests/test_relabel.py and
+ * knn(points, n, k, dist, idx) -> None
+ *   The k nearest points of every point, itself included (cKDTree(points).query(points, k)).
+ *   points : (n, 3) float64, finite
+ *   dist   : (n, k) float64, written: sqrt of ((dx^2 + dy^2) + dz^2), ascending
+ *   idx    : (n, k) int64, written; ties in distance go to the lower index; where k > n
+ *            the missing neighbours get +inf and index n (as cKDTree's)
+ *   The same doubles as cKDTree's Euclidean query (squares summed over x, y, z in that
+ *   order, one square root), found on a uniform grid ring of cells by ring of cells,
+ *   until the next ring lies beyond the k-th best.
+ *
+ * graph_csr(points, n, kk, dist, idx, limit, depth_step, indptr, indices, data) -> nnz
+ *   geodesic_graph's edges as a symmetric CSR matrix, from knn's (or cKDTree's) lists.
+ *   dist, idx : (n, kk) float64 / int64, each point's kk nearest, the first column dropped
+ *               (the point itself)
+ *   An edge i-j is kept where its length is at most `limit`, j < n (a found neighbour),
+ *   j != i, and, unless depth_step is NaN, not |z_j - z_i| > depth_step with
+ *   |z_j - z_i| > hypot(x_j - x_i, y_j - y_i); lengths below 1e-9 become 1e-9.
+ *   indptr : (n + 1,) int32; indices, data : (2 n (kk - 1),) int32 / float64, written
+ *            in their first nnz entries: each row's columns ascending, every edge in
+ *            both of its rows once (found from both ends, it has the same length)
+ *
+ * The twins are scipy's dijkstra and cKDTree, the NumPy descent and JointVotes.cast's NumPy path; tests/test_relabel.py and
  * tests/test_forest.py and tests/test_votes.py compare them. Plain buffer protocol (no NumPy C API). Build with
  * plain -O2/-O3: it relies on IEEE infinities and float32 rounding, so never with
  * -ffast-math or -ffinite-math-only.
@@ -52,6 +73,7 @@
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
 
 typedef struct {
     double key;
@@ -392,6 +414,313 @@ static PyObject *cast(PyObject *self, PyObject *args) {
     return PyLong_FromSsize_t(m);
 }
 
+/* Insert candidate (d2, j) into the list (d, id) of `*have` <= k entries, ascending by
+ * (d2, j); a full list drops its last entry. */
+static inline void knn_insert(double *d, int64_t *id, Py_ssize_t k, Py_ssize_t *have,
+                              double d2, int64_t j) {
+    Py_ssize_t pos;
+    if (*have < k) {
+        pos = (*have)++;
+    } else {
+        if (d2 > d[k - 1] || (d2 == d[k - 1] && j > id[k - 1])) return;
+        pos = k - 1;
+    }
+    while (pos > 0 && (d[pos - 1] > d2 || (d[pos - 1] == d2 && id[pos - 1] > j))) {
+        d[pos] = d[pos - 1];
+        id[pos] = id[pos - 1];
+        --pos;
+    }
+    d[pos] = d2;
+    id[pos] = j;
+}
+
+/* One query of knn: the cells at Chebyshev distance r around (cx, cy, cz), clipped. */
+static inline void knn_ring(const double *ps, const int64_t *orig, const int32_t *start,
+                            const Py_ssize_t dims[3], Py_ssize_t cx, Py_ssize_t cy,
+                            Py_ssize_t cz, Py_ssize_t r, double xi, double yi, double zi,
+                            double *d, int64_t *id, Py_ssize_t k, Py_ssize_t *have) {
+    for (Py_ssize_t z = cz - r; z <= cz + r; z++) {
+        if (z < 0 || z >= dims[2]) continue;
+        for (Py_ssize_t y = cy - r; y <= cy + r; y++) {
+            if (y < 0 || y >= dims[1]) continue;
+            /* inside the shell's faces only its two x ends are at distance r */
+            const int face = (z == cz - r || z == cz + r || y == cy - r || y == cy + r);
+            const Py_ssize_t step = face || r == 0 ? 1 : 2 * r;
+            for (Py_ssize_t x = cx - r; x <= cx + r; x += step) {
+                if (x < 0 || x >= dims[0]) continue;
+                const Py_ssize_t cell = (z * dims[1] + y) * dims[0] + x;
+                for (int32_t q = start[cell]; q < start[cell + 1]; q++) {
+                    const double dx = xi - ps[3 * q], dy = yi - ps[3 * q + 1];
+                    const double dz = zi - ps[3 * q + 2];
+                    const double d2 = dx * dx + dy * dy + dz * dz;
+                    if (*have < k || d2 <= d[k - 1]) knn_insert(d, id, k, have, d2, orig[q]);
+                }
+            }
+        }
+    }
+}
+
+static PyObject *knn(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *o_points, *o_dist, *o_idx;
+    Py_ssize_t n, k;
+    if (!PyArg_ParseTuple(args, "OnnOO", &o_points, &n, &k, &o_dist, &o_idx)) return NULL;
+    if (n < 0 || n >= INT32_MAX / 8 || k < 1) {
+        PyErr_SetString(PyExc_ValueError, "knn: need 0 <= n < 2^28 and k >= 1");
+        return NULL;
+    }
+    Py_buffer b_points, b_dist, b_idx;
+    if (get_buffer(o_points, &b_points, 0, 8, 3 * n, "points") < 0) return NULL;
+    if (get_buffer(o_dist, &b_dist, 1, 8, n * k, "dist") < 0) {
+        PyBuffer_Release(&b_points);
+        return NULL;
+    }
+    if (get_buffer(o_idx, &b_idx, 1, 8, n * k, "idx") < 0) {
+        PyBuffer_Release(&b_points);
+        PyBuffer_Release(&b_dist);
+        return NULL;
+    }
+    const double *p = (const double *)b_points.buf;
+    double *dist = (double *)b_dist.buf;
+    int64_t *idx = (int64_t *)b_idx.buf;
+    int ok = 1;
+    double lo[3] = {0.0, 0.0, 0.0}, ext[3] = {0.0, 0.0, 0.0}, scale = 0.0;
+    for (Py_ssize_t i = 0; i < n && ok; i++)
+        for (int a = 0; a < 3; a++)
+            if (!isfinite(p[3 * i + a])) ok = 0;
+    if (!ok) {
+        PyErr_SetString(PyExc_ValueError, "knn: non-finite point");
+        goto release;
+    }
+    for (int a = 0; a < 3 && n > 0; a++) {
+        double mn = p[a], mx = p[a];
+        for (Py_ssize_t i = 1; i < n; i++) {
+            const double v = p[3 * i + a];
+            mn = v < mn ? v : mn;
+            mx = v > mx ? v : mx;
+        }
+        lo[a] = mn;
+        ext[a] = mx - mn;
+        scale = fmax(scale, fmax(fabs(mn), fabs(mx)));
+    }
+    /* Cell size: 1.25 times the median k-th neighbour distance of 16 points spread over
+     * the index range (brute force), so that the 27 cells around a point usually hold its
+     * k nearest; at most about 8 n cells. Only the time depends on it, not the result. */
+    double sample_r[16];
+    Py_ssize_t n_sample = n < 16 ? n : 16;
+    {
+        double *sd = (double *)malloc(sizeof(double) * (size_t)k);
+        int64_t *sid = (int64_t *)malloc(sizeof(int64_t) * (size_t)k);
+        if (sd == NULL || sid == NULL) {
+            free(sd);
+            free(sid);
+            ok = 0;
+            PyErr_NoMemory();
+            goto release;
+        }
+        for (Py_ssize_t s_ = 0; s_ < n_sample; s_++) {
+            const Py_ssize_t i = s_ * n / n_sample;
+            Py_ssize_t have = 0;
+            for (Py_ssize_t j = 0; j < n; j++) {
+                const double dx = p[3 * i] - p[3 * j], dy = p[3 * i + 1] - p[3 * j + 1];
+                const double dz = p[3 * i + 2] - p[3 * j + 2];
+                const double d2 = dx * dx + dy * dy + dz * dz;
+                if (have < k || d2 <= sd[k - 1]) knn_insert(sd, sid, k, &have, d2, j);
+            }
+            sample_r[s_] = sqrt(sd[have - 1]);
+        }
+        free(sd);
+        free(sid);
+    }
+    for (Py_ssize_t a_ = 1; a_ < n_sample; a_++) /* insertion sort for the median */
+        for (Py_ssize_t q = a_; q > 0 && sample_r[q - 1] > sample_r[q]; q--) {
+            const double t = sample_r[q];
+            sample_r[q] = sample_r[q - 1];
+            sample_r[q - 1] = t;
+        }
+    const double e_max = fmax(ext[0], fmax(ext[1], ext[2]));
+    double h = n_sample > 0 ? 1.25 * sample_r[n_sample / 2] : 1.0;
+    if (!(h > 1e-9 * e_max)) h = e_max > 0.0 ? e_max / (double)n : 1.0; /* duplicates */
+    Py_ssize_t dims[3];
+    for (;;) {
+        double cells = 1.0;
+        for (int a = 0; a < 3; a++) {
+            dims[a] = (Py_ssize_t)(ext[a] / h) + 1;
+            cells *= (double)dims[a];
+        }
+        if (cells <= 8.0 * (double)n + 64.0) break;
+        h *= 1.5;
+    }
+    const Py_ssize_t n_cells = dims[0] * dims[1] * dims[2];
+    int32_t *start = (int32_t *)calloc((size_t)(n_cells + 1), sizeof(int32_t));
+    int32_t *cell_of = (int32_t *)malloc(sizeof(int32_t) * (size_t)(n + 1));
+    double *ps = (double *)malloc(sizeof(double) * (size_t)(3 * n + 1));
+    int64_t *orig = (int64_t *)malloc(sizeof(int64_t) * (size_t)(n + 1));
+    if (start == NULL || cell_of == NULL || ps == NULL || orig == NULL) {
+        ok = 0;
+        PyErr_NoMemory();
+    } else {
+        Py_BEGIN_ALLOW_THREADS
+        /* Counting sort of the points by cell (ascending index within a cell). */
+        for (Py_ssize_t i = 0; i < n; i++) {
+            Py_ssize_t c[3];
+            for (int a = 0; a < 3; a++) {
+                c[a] = (Py_ssize_t)((p[3 * i + a] - lo[a]) / h);
+                c[a] = c[a] < 0 ? 0 : (c[a] >= dims[a] ? dims[a] - 1 : c[a]);
+            }
+            cell_of[i] = (int32_t)((c[2] * dims[1] + c[1]) * dims[0] + c[0]);
+            start[cell_of[i] + 1]++;
+        }
+        for (Py_ssize_t c = 0; c < n_cells; c++) start[c + 1] += start[c];
+        for (Py_ssize_t i = 0; i < n; i++) {
+            const int32_t q = start[cell_of[i]]++;
+            ps[3 * q] = p[3 * i];
+            ps[3 * q + 1] = p[3 * i + 1];
+            ps[3 * q + 2] = p[3 * i + 2];
+            orig[q] = i;
+        }
+        for (Py_ssize_t c = n_cells; c > 0; c--) start[c] = start[c - 1];
+        start[0] = 0;
+        const Py_ssize_t max_r = dims[0] > dims[1] ? (dims[0] > dims[2] ? dims[0] : dims[2])
+                                                   : (dims[1] > dims[2] ? dims[1] : dims[2]);
+        for (Py_ssize_t i = 0; i < n; i++) {
+            const double xi = p[3 * i], yi = p[3 * i + 1], zi = p[3 * i + 2];
+            const int32_t cell = cell_of[i];
+            const Py_ssize_t cx = cell % dims[0], cy = (cell / dims[0]) % dims[1];
+            const Py_ssize_t cz = cell / (dims[0] * dims[1]);
+            double *d = dist + i * k;
+            int64_t *id = idx + i * k;
+            Py_ssize_t have = 0;
+            for (Py_ssize_t r = 0; r < max_r; r++) {
+                knn_ring(ps, orig, start, dims, cx, cy, cz, r, xi, yi, zi, d, id, k, &have);
+                /* Points beyond ring r lie at least r h away along some axis, less the
+                 * rounding of their cell's index: none of them can enter a list whose
+                 * k-th is nearer. */
+                const double reach = (double)r * h * (1.0 - 1e-9) - 1e-12 * scale;
+                if (have == k && reach > 0.0 && d[k - 1] < reach * reach) break;
+            }
+            for (Py_ssize_t c = 0; c < have; c++) d[c] = sqrt(d[c]);
+            for (Py_ssize_t c = have; c < k; c++) {
+                d[c] = INFINITY;
+                id[c] = n;
+            }
+        }
+        Py_END_ALLOW_THREADS
+    }
+    free(start);
+    free(cell_of);
+    free(ps);
+    free(orig);
+release:
+    PyBuffer_Release(&b_points);
+    PyBuffer_Release(&b_dist);
+    PyBuffer_Release(&b_idx);
+    if (!ok) return NULL;
+    Py_RETURN_NONE;
+}
+
+static PyObject *graph_csr(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *o_points, *o_dist, *o_idx, *o_indptr, *o_indices, *o_data;
+    Py_ssize_t n, kk;
+    double limit, depth_step;
+    if (!PyArg_ParseTuple(args, "OnnOOddOOO", &o_points, &n, &kk, &o_dist, &o_idx, &limit,
+                          &depth_step, &o_indptr, &o_indices, &o_data))
+        return NULL;
+    if (n < 0 || kk < 1 || n * (kk - 1) >= INT32_MAX / 2) {
+        PyErr_SetString(PyExc_ValueError, "graph_csr: bad n or kk");
+        return NULL;
+    }
+    const Py_ssize_t half = n * (kk - 1); /* directed edges at most */
+    Py_buffer b[6];
+    PyObject *objs[6] = {o_points, o_dist, o_idx, o_indptr, o_indices, o_data};
+    const Py_ssize_t items[6] = {8, 8, 8, 4, 4, 8};
+    const Py_ssize_t counts[6] = {3 * n, n * kk, n * kk, n + 1, 2 * half, 2 * half};
+    const char *names[6] = {"points", "dist", "idx", "indptr", "indices", "data"};
+    int got = 0;
+    for (; got < 6; got++)
+        if (get_buffer(objs[got], &b[got], got >= 3, items[got], counts[got], names[got]) < 0)
+            break;
+    Py_ssize_t nnz = -1;
+    int32_t *ends = NULL, *fill = NULL;
+    double *lens = NULL;
+    if (got == 6) {
+        ends = (int32_t *)malloc(sizeof(int32_t) * (size_t)(2 * half + 1));
+        fill = (int32_t *)malloc(sizeof(int32_t) * (size_t)(n + 1));
+        lens = (double *)malloc(sizeof(double) * (size_t)(half + 1));
+        if (ends == NULL || fill == NULL || lens == NULL) PyErr_NoMemory();
+    }
+    if (got == 6 && ends != NULL && fill != NULL && lens != NULL) {
+        const double *p = (const double *)b[0].buf, *dist = (const double *)b[1].buf;
+        const int64_t *idx = (const int64_t *)b[2].buf;
+        int32_t *indptr = (int32_t *)b[3].buf, *indices = (int32_t *)b[4].buf;
+        double *data = (double *)b[5].buf;
+        const int cut_steps = !isnan(depth_step);
+        /* The kept edges (i, j), in `ends` as pairs, each counted in both of its rows. */
+        for (Py_ssize_t v = 0; v <= n; v++) indptr[v] = 0;
+        Py_ssize_t m = 0;
+        for (Py_ssize_t i = 0; i < n; i++) {
+            for (Py_ssize_t c = 1; c < kk; c++) {
+                const int64_t j = idx[i * kk + c];
+                const double len = dist[i * kk + c];
+                if (!(len <= limit) || j < 0 || j >= n || j == i) continue;
+                if (cut_steps) {
+                    const double dz = fabs(p[3 * j + 2] - p[3 * i + 2]);
+                    if (dz > depth_step &&
+                        dz > hypot(p[3 * j] - p[3 * i], p[3 * j + 1] - p[3 * i + 1]))
+                        continue;
+                }
+                ends[2 * m] = (int32_t)i;
+                ends[2 * m + 1] = (int32_t)j;
+                lens[m++] = len < 1e-9 ? 1e-9 : len;
+                indptr[i + 1]++;
+                indptr[j + 1]++;
+            }
+        }
+        for (Py_ssize_t v = 0; v < n; v++) indptr[v + 1] += indptr[v];
+        memcpy(fill, indptr, sizeof(int32_t) * (size_t)(n + 1));
+        for (Py_ssize_t e = 0; e < m; e++) { /* both directions, bucketed by row */
+            const int32_t i = ends[2 * e], j = ends[2 * e + 1];
+            indices[fill[i]] = j;
+            data[fill[i]++] = lens[e];
+            indices[fill[j]] = i;
+            data[fill[j]++] = lens[e];
+        }
+        /* Each row's columns ascending, an edge found from both ends kept once (its
+         * length is the same from each: the squared distance is symmetric). */
+        Py_ssize_t out = 0;
+        for (Py_ssize_t v = 0; v < n; v++) {
+            const Py_ssize_t lo = indptr[v], hi = indptr[v + 1];
+            for (Py_ssize_t a = lo + 1; a < hi; a++) {
+                const int32_t col = indices[a];
+                const double len = data[a];
+                Py_ssize_t q = a;
+                while (q > lo && indices[q - 1] > col) {
+                    indices[q] = indices[q - 1];
+                    data[q] = data[q - 1];
+                    --q;
+                }
+                indices[q] = col;
+                data[q] = len;
+            }
+            indptr[v] = (int32_t)out;
+            for (Py_ssize_t a = lo; a < hi; a++) {
+                if (a > lo && indices[a] == indices[a - 1]) continue;
+                indices[out] = indices[a];
+                data[out++] = data[a];
+            }
+        }
+        indptr[n] = (int32_t)out;
+        nnz = out;
+    }
+    free(ends);
+    free(fill);
+    free(lens);
+    for (int q = 0; q < got; q++) PyBuffer_Release(&b[q]);
+    if (nnz < 0) return NULL;
+    return PyLong_FromSsize_t(nnz);
+}
+
 static PyMethodDef methods[] = {
     {"descend", descend, METH_VARARGS,
      "descend(table, image, rows, cols, row_scale, col_scale, roots, levels, height, width, "
@@ -399,6 +728,11 @@ static PyMethodDef methods[] = {
     {"cast", cast, METH_VARARGS,
      "cast(points, leaves, joint, offset, weight, wanted, where, joint_out, weight_out) -> M: "
      "the joint votes."},
+    {"knn", knn, METH_VARARGS,
+     "knn(points, n, k, dist, idx): every point's k nearest points (itself included)."},
+    {"graph_csr", graph_csr, METH_VARARGS,
+     "graph_csr(points, n, kk, dist, idx, limit, depth_step, indptr, indices, data) -> nnz: "
+     "the k-NN graph as a symmetric CSR matrix."},
     {"dijkstra", dijkstra, METH_VARARGS,
      "dijkstra(indptr, indices, data, n, sources, limits, out): multi-run Dijkstra."},
     {NULL, NULL, 0, NULL}};

@@ -59,6 +59,7 @@ def geodesic_graph(
     max_edge_factor: float = 2.2,
     max_edge: float | None = None,
     depth_step: float | None = 0.06,
+    compiled: bool = True,
 ) -> GeodesicGraph:
     """The k-NN graph of Algorithm 2, step 1, cut where edges jump.
 
@@ -77,20 +78,74 @@ def geodesic_graph(
     max_edge : float, optional
     depth_step : float or None
         ``None`` disables the depth-discontinuity cut.
+    compiled : bool
+        Use the compiled k-NN and graph kernels where built (``False`` forces their
+        NumPy and SciPy twin; the two give the same graph).
 
     Returns
     -------
     GeodesicGraph
     """
-    from scipy.spatial import cKDTree
-
     points = check_points(points, "points", caller="geodesic_graph", min_points=2)
+    if compiled and _ckernels is not None:
+        return _graph_compiled(points, k, max_edge_factor, max_edge, depth_step)
+    return _graph_numpy(points, k, max_edge_factor, max_edge, depth_step)
+
+
+def _neighbours(points: np.ndarray, kk: int, compiled: bool) -> tuple[np.ndarray, np.ndarray]:
+    """``cKDTree(points).query(points, k=kk)`` as (N, kk) arrays; the compiled kernel
+    gives the same doubles and, but for ties in distance, the same indices."""
+    n = len(points)
+    if not compiled or _ckernels is None:
+        from scipy.spatial import cKDTree
+
+        dist, idx = cKDTree(points).query(points, k=kk)
+        return dist.reshape(n, kk), idx.reshape(n, kk)
+    dist, idx = np.empty((n, kk)), np.empty((n, kk), dtype=np.int64)
+    _ckernels.knn(points, n, kk, dist, idx)
+    return dist, idx
+
+
+def _edge_limit(nearest: np.ndarray, max_edge_factor: float, max_edge: float | None):
+    """(median of the nearest-neighbour distances ``nearest``, longest edge kept)."""
+    spacing = float(np.median(nearest))
+    limit = max_edge if max_edge is not None else max_edge_factor * max(spacing, 1e-6)
+    return spacing, limit
+
+
+def _graph_compiled(points, k, max_edge_factor, max_edge, depth_step) -> GeodesicGraph:
+    """:func:`geodesic_graph` by the compiled k-NN and CSR kernels (the same graph)."""
     n = len(points)
     kk = min(k + 1, n)
-    dist, idx = cKDTree(points).query(points, k=kk)
+    points = np.ascontiguousarray(points)
+    dist, idx = _neighbours(points, kk, compiled=True)
+    spacing, limit = _edge_limit(dist[:, 1], max_edge_factor, max_edge)
+    indptr = np.empty(n + 1, dtype=np.int32)
+    indices = np.empty(2 * n * (kk - 1), dtype=np.int32)
+    data = np.empty(2 * n * (kk - 1))
+    step = np.nan if depth_step is None else float(depth_step)
+    nnz = _ckernels.graph_csr(points, n, kk, dist, idx, limit, step, indptr, indices, data)
+    indices, data = indices[:nnz], data[:nnz]
+    matrix = sparse.csr_matrix((data, indices, indptr), shape=(n, n))
+    # Each undirected edge once, rows < cols, in (row, col) order: the upper triangle.
+    rows = np.repeat(np.arange(n), np.diff(indptr))
+    upper = indices > rows
+    return GeodesicGraph(
+        matrix=matrix,
+        rows=rows[upper],
+        cols=indices[upper].astype(np.int64),
+        lengths=data[upper],
+        spacing=spacing,
+    )
+
+
+def _graph_numpy(points, k, max_edge_factor, max_edge, depth_step) -> GeodesicGraph:
+    """The NumPy twin of :func:`_graph_compiled`."""
+    n = len(points)
+    kk = min(k + 1, n)
+    dist, idx = _neighbours(points, kk, compiled=False)
     dist, idx = dist[:, 1:], idx[:, 1:]
-    spacing = float(np.median(dist[:, 0]))
-    limit = max_edge if max_edge is not None else max_edge_factor * max(spacing, 1e-6)
+    spacing, limit = _edge_limit(dist[:, 0], max_edge_factor, max_edge)
     cols = idx.ravel()
     lengths = dist.ravel()
     keep = lengths <= limit  # a missing neighbour (k >= n) has an infinite distance
@@ -98,7 +153,9 @@ def geodesic_graph(
     edge = np.flatnonzero(keep)
     rows = edge // (kk - 1)
     cols, lengths = cols[edge], lengths[edge]
-    if depth_step is not None and len(edge):
+    keep = rows != cols  # a duplicate point may list its own index: no self-loops
+    rows, cols, lengths = rows[keep], cols[keep], lengths[keep]
+    if depth_step is not None and len(rows):
         dz = np.abs(points[cols, 2] - points[rows, 2])
         steep = np.flatnonzero(dz > depth_step)
         if len(steep):

@@ -11,6 +11,11 @@ import numpy as np
 from posedrift._validation import check_rng, check_scalar
 from posedrift.camera import DepthFrame, Intrinsics
 
+try:  # the compiled kernel is optional: built by ``pip install -e .`` when a compiler exists
+    from posedrift.points import _csegment  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the build
+    _csegment = None
+
 
 class BackgroundModel:
     """A per-pixel background depth for a static camera.
@@ -248,8 +253,25 @@ def _dilate(mask: np.ndarray, iterations: int = 1) -> np.ndarray:
     return out
 
 
-def _components(mask: np.ndarray, depth: np.ndarray, max_step: float) -> tuple[np.ndarray, int]:
-    """Components of ``mask``; 4-neighbours join where their depths differ by < ``max_step``."""
+def _components(
+    mask: np.ndarray, depth: np.ndarray, max_step: float, compiled: bool = True
+) -> tuple[np.ndarray, int]:
+    """Components of ``mask``; 4-neighbours join where their depths differ by < ``max_step``.
+
+    ``depth`` is float32 (as :func:`segment_person` makes it). The compiled kernel, where
+    built, gives the same labels as the NumPy and SciPy code below.
+    """
+    if compiled and _csegment is not None and depth.dtype == np.float32:
+        labels = np.empty(mask.shape, dtype=np.int32)
+        count = _csegment.components(
+            np.ascontiguousarray(mask, dtype=np.uint8),
+            np.ascontiguousarray(depth),
+            mask.shape[0],
+            mask.shape[1],
+            float(max_step),
+            labels,
+        )
+        return labels, count
     from scipy import ndimage
 
     # Cut pixels at depth discontinuities, label, then give cut pixels their neighbours' label.
