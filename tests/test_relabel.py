@@ -272,6 +272,7 @@ def test_compiled_graph_matches_its_twin(options):
     clouds += [rng.normal(size=(n, 3)) * rng.uniform(0.01, 2.0, size=3) for n in (2, 3, 9, 700)]
     clouds.append(np.vstack([clouds[-1], clouds[-1][:50] + 1e-13]))  # near-duplicates
     clouds.append(np.full((4, 3), 2.0) + [[0, 0, 0], [0.1, 0, 0], [0, 0.2, 0], [0, 0, 0.4]])
+    clouds.append(np.vstack([rng.normal(size=(300, 3)) * 1e-3, [[1e12, 0.0, 0.0]]]))  # far
     for pts in clouds:
         compiled = geodesic_graph(pts, **options)
         twin = geodesic_graph(pts, compiled=False, **options)

@@ -542,15 +542,13 @@ static PyObject *knn(PyObject *self, PyObject *args) {
     double h = n_sample > 0 ? 1.25 * sample_r[n_sample / 2] : 1.0;
     if (!(h > 1e-9 * e_max)) h = e_max > 0.0 ? e_max / (double)n : 1.0; /* duplicates */
     Py_ssize_t dims[3];
-    for (;;) {
+    for (;;) { /* in doubles: a far outlier must not overflow the cell counts */
         double cells = 1.0;
-        for (int a = 0; a < 3; a++) {
-            dims[a] = (Py_ssize_t)(ext[a] / h) + 1;
-            cells *= (double)dims[a];
-        }
+        for (int a = 0; a < 3; a++) cells *= floor(ext[a] / h) + 1.0;
         if (cells <= 8.0 * (double)n + 64.0) break;
         h *= 1.5;
     }
+    for (int a = 0; a < 3; a++) dims[a] = (Py_ssize_t)(ext[a] / h) + 1;
     const Py_ssize_t n_cells = dims[0] * dims[1] * dims[2];
     int32_t *start = (int32_t *)calloc((size_t)(n_cells + 1), sizeof(int32_t));
     int32_t *cell_of = (int32_t *)malloc(sizeof(int32_t) * (size_t)(n + 1));
