@@ -323,6 +323,23 @@ def test_compiled_label_mass_matches_numpy_twin(d):
     twin = _estep.posterior_label_mass(x + 1e3, t, 1e-3, 0.0, labels, 15, compiled=False)
     np.testing.assert_allclose(far, twin, rtol=1e-12)
     np.testing.assert_allclose(far.sum(axis=1), 1.0)
+    # Truncated to the points within the half-width along the longest axis: every entry
+    # within eps of the exact twin's, and nothing left out where there is no outlier term.
+    stretched = t * np.linspace(3.0, 0.5, d)
+    for sigma2, c in [(0.05, 0.01), (1e-3, 1e-6), (0.5, 0.3)]:
+        # the window is narrower than the points' spread: some terms are left out
+        assert 2 * _estep.truncation_halfwidth(sigma2, c, 1e-9) < np.ptp(stretched[:, 0])
+        ref = _estep.posterior_label_mass(x, stretched, sigma2, c, labels, 15, compiled=False)
+        got = _estep.posterior_label_mass(x, stretched, sigma2, c, labels, 15, truncate_eps=1e-9)
+        assert np.abs(got - ref).max() < 1e-9
+    ref = _estep.posterior_label_mass(x, t, 0.05, 0.0, labels, 15)
+    assert np.array_equal(
+        _estep.posterior_label_mass(x, t, 0.05, 0.0, labels, 15, truncate_eps=1e-9), ref
+    )
+    with pytest.raises(ValueError, match="0 <= axis < d"):
+        _estep._cestep.label_mass(
+            x, t, 210, 190, d, 1.0, 0.1, labels, 15, np.empty((210, 15)), d, 0.1
+        )
     with pytest.raises(ValueError, match=r"labels must lie in \[0, 15\)"):
         _estep._cestep.label_mass(x, t, 210, 190, d, 1.0, 0.0, labels + 1, 15, np.empty((210, 15)))
     with pytest.raises(ValueError, match="buffer 'out'"):

@@ -25,10 +25,13 @@
  *   U = (Z' dP1 Z + reg I)^-1 Z' (P X - dP1 Y) (K, D) into u, moved = Y + Z U (M, D).
  *   ok = 0 when the K x K Cholesky fails (the caller falls back to a checked solve).
  *
- * label_mass(target, moved, n, m, d, sigma2, c, labels, n_labels, out)
+ * label_mass(target, moved, n, m, d, sigma2, c, labels, n_labels, out[, axis, h])
  *   The posterior mass of each label's source points per target point (the tracker's
  *   label transfer): out[n, l] = sum of k_mn over source points m of label l, divided by
  *   den_n = sum_m k_mn + c. labels (M,) int64 in [0, n_labels); out (N, n_labels) float64.
+ *   With h > 0 (truncation_halfwidth's distance) each label's points are sorted along
+ *   `axis` and a target point sums only those within h of it along the axis: the terms
+ *   left out are each below eps c, so every entry moves by less than eps.
  *
  * The NumPy twins are posedrift.registration._estep.estep_numpy,
  * posedrift.registration._estep.posterior_label_mass (compiled=False) and
@@ -312,20 +315,29 @@ static double kernel_f32(const float *xf, const double *x, const float *mt, Py_s
 
 /* x (N, D); mt (D, M) the source transposed and grouped by label, label l's points in
  * columns [first[l], first[l + 1]); out (N, L). Each label's kernel values are summed
- * by a vectorized reduction over its own columns. */
+ * by a vectorized reduction over its own columns (with h > 0, over those within h of
+ * the target point along `axis`, each label's columns sorted along it). */
 MULTIVERSION
 static void label_mass_f64(const double *x, const double *mt, Py_ssize_t n, Py_ssize_t m,
                            Py_ssize_t d, double sigma2, double c, const Py_ssize_t *first,
-                           Py_ssize_t n_labels, double *out, double *row) {
+                           Py_ssize_t n_labels, Py_ssize_t axis, double h, double *out,
+                           double *row) {
     const double a = -0.5 / sigma2;
     const double tiny = 2.2250738585072014e-308;
+    const double *ax = mt + axis * m; /* sorted within each label's range when h > 0 */
     for (Py_ssize_t i = 0; i < n; ++i) {
         const double *xd = x + i * d;
         if (d != 3) squared_distances(xd, mt, m, m, d, row);
         double *o = out + i * n_labels;
         double s = 0.0;
         for (Py_ssize_t l = 0; l < n_labels; ++l) {
-            const Py_ssize_t j0 = first[l], j1 = first[l + 1];
+            Py_ssize_t j0 = first[l], j1 = first[l + 1];
+            if (h > 0.0 && j1 > j0) { /* the label's points within h along the axis */
+                Py_ssize_t lo, hi;
+                window(ax + j0, 0, j1 - j0, xd[axis], h, &lo, &hi);
+                j1 = j0 + hi;
+                j0 += lo;
+            }
             double sl = 0.0;
             if (d == 3) {
                 const double x0 = xd[0], x1 = xd[1], x2 = xd[2];
@@ -679,17 +691,19 @@ done:
 
 static PyObject *py_label_mass(PyObject *self, PyObject *args) {
     Py_buffer bx, bm, blab, bout;
-    Py_ssize_t n, m, d, n_labels;
-    double sigma2, c;
-    if (!PyArg_ParseTuple(args, "y*y*nnnddy*nw*", &bx, &bm, &n, &m, &d, &sigma2, &c, &blab,
-                          &n_labels, &bout))
+    Py_ssize_t n, m, d, n_labels, axis = 0;
+    double sigma2, c, h = 0.0;
+    if (!PyArg_ParseTuple(args, "y*y*nnnddy*nw*|nd", &bx, &bm, &n, &m, &d, &sigma2, &c, &blab,
+                          &n_labels, &bout, &axis, &h))
         return NULL;
     PyObject *result = NULL;
     double *work = NULL;
     Py_ssize_t *first = NULL;
-    if (n < 1 || m < 1 || d < 1 || n_labels < 1 || !(sigma2 > 0.0) || !(c >= 0.0)) {
+    if (n < 1 || m < 1 || d < 1 || n_labels < 1 || !(sigma2 > 0.0) || !(c >= 0.0) ||
+        axis < 0 || axis >= d || !(h >= 0.0)) {
         PyErr_SetString(PyExc_ValueError,
-                        "_cestep.label_mass: need n, m, d, n_labels >= 1, sigma2 > 0, c >= 0");
+                        "_cestep.label_mass: need n, m, d, n_labels >= 1, sigma2 > 0, c >= 0, "
+                        "0 <= axis < d, h >= 0");
         goto done;
     }
     if (check_buf(&bx, n * d, 8, "label_mass", "target") ||
@@ -707,27 +721,39 @@ static PyObject *py_label_mass(PyObject *self, PyObject *args) {
     }
     work = (double *)malloc((size_t)(d * m + m) * sizeof(double));
     first = (Py_ssize_t *)calloc((size_t)(2 * n_labels + 1), sizeof(Py_ssize_t));
-    if (!work || !first) {
+    keyed *by_axis = h > 0.0 ? (keyed *)malloc((size_t)m * sizeof(keyed)) : NULL;
+    if (!work || !first || (h > 0.0 && !by_axis)) {
+        free(by_axis);
         PyErr_NoMemory();
         goto done;
     }
     const double *x = (const double *)bx.buf, *mv = (const double *)bm.buf;
     double *out = (double *)bout.buf;
     Py_BEGIN_ALLOW_THREADS
-    /* counting sort of the source by label: label l's points go to [first[l], first[l+1]) */
+    /* counting sort of the source by label: label l's points go to [first[l], first[l+1]),
+     * in index order, or with a window (h > 0) in order along the axis */
     Py_ssize_t *next = first + n_labels + 1;
     for (Py_ssize_t j = 0; j < m; ++j) ++first[lab[j] + 1];
     for (Py_ssize_t l = 0; l < n_labels; ++l) {
         first[l + 1] += first[l];
         next[l] = first[l];
     }
+    if (by_axis) {
+        for (Py_ssize_t j = 0; j < m; ++j) {
+            by_axis[j].key = mv[j * d + axis];
+            by_axis[j].idx = j;
+        }
+        qsort(by_axis, (size_t)m, sizeof(keyed), cmp_keyed);
+    }
     double *mt = work, *row = work + d * m;
-    for (Py_ssize_t j = 0; j < m; ++j) {
+    for (Py_ssize_t q = 0; q < m; ++q) {
+        const Py_ssize_t j = by_axis ? (Py_ssize_t)by_axis[q].idx : q;
         const Py_ssize_t col = next[lab[j]]++;
         for (Py_ssize_t k = 0; k < d; ++k) mt[k * m + col] = mv[j * d + k];
     }
-    label_mass_f64(x, mt, n, m, d, sigma2, c, first, n_labels, out, row);
+    label_mass_f64(x, mt, n, m, d, sigma2, c, first, n_labels, axis, h, out, row);
     Py_END_ALLOW_THREADS
+    free(by_axis);
     result = Py_None;
     Py_INCREF(result);
 done:
@@ -748,7 +774,7 @@ static PyMethodDef methods[] = {
      "lowrank_mstep(zt, m, k, d, p1, px, source, reg, u, moved)"
      " -> (ok, sum PX . moved, sum P1 |moved|^2)"},
     {"label_mass", py_label_mass, METH_VARARGS,
-     "label_mass(target, moved, n, m, d, sigma2, c, labels, n_labels, out) -> None"},
+     "label_mass(target, moved, n, m, d, sigma2, c, labels, n_labels, out[, axis, h]) -> None"},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_cestep",

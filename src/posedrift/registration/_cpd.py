@@ -28,7 +28,7 @@ from posedrift.registration._result import ConvergenceWarning, CPDResult
 
 _SIGMA2_FLOOR = 1e-10  # in normalized units (squared fractions of the target's RMS radius)
 _SIGMA2_FLOOR_32 = 1e-7  # float32 E-step: distances are only good to ~1e-7 relative
-_TRUNCATE_EPS = 1e-12  # compiled E-step: drop kernel terms below this share of the outlier term
+_TRUNCATE_EPS = _estep.TRUNCATE_EPS  # compiled E-step: terms below this share of c dropped
 
 
 # --------------------------------------------------------------------------- kernels

@@ -95,6 +95,11 @@ def estep_numpy(
     return p1, pt1, px, log_den
 
 
+TRUNCATE_EPS = 1e-12
+"""The compiled E-step and label transfer leave out kernel terms below this share of the
+outlier term (:func:`truncation_halfwidth`): every posterior entry is exact to it."""
+
+
 def truncation_halfwidth(sigma2: float, c: float, eps: float) -> float:
     """Distance beyond which every kernel value is below ``eps * c`` (0: no truncation).
 
@@ -245,22 +250,28 @@ def posterior_label_mass(
     n_labels: int,
     *,
     compiled: bool = True,
+    truncate_eps: float = 0.0,
 ) -> np.ndarray:
     """``(N, n_labels)``: posterior mass of each label's source points, per target point.
 
     The compiled kernel when built (``compiled=True``: its exponential vectorized for
     the processor at run time, where NumPy's float64 ``exp`` is scalar on processors
     without AVX-512), else the blocked NumPy twin; they agree to about 1e-13 (the
-    twin expands squared distances, the kernel sums squared differences).
+    twin expands squared distances, the kernel sums squared differences). With
+    ``truncate_eps > 0`` the kernel sums, for each target point, only the source points
+    within :func:`truncation_halfwidth` of it along the source's longest axis, which
+    moves every entry by less than ``truncate_eps`` (the twin stays exact).
     """
     n, d = target.shape
     m = moved.shape[0]
     kernel = getattr(_cestep, "label_mass", None) if compiled else None
     if kernel is not None and n and m and sigma2 > 0:  # (the twin covers the edge cases)
+        moved = np.ascontiguousarray(moved, dtype=np.float64)
+        axis = int(np.argmax([np.ptp(moved[:, k]) for k in range(d)]))
         out = np.empty((n, n_labels))
         kernel(
             np.ascontiguousarray(target, dtype=np.float64),
-            np.ascontiguousarray(moved, dtype=np.float64),
+            moved,
             n,
             m,
             d,
@@ -269,6 +280,8 @@ def posterior_label_mass(
             np.ascontiguousarray(labels, dtype=np.int64),
             int(n_labels),
             out,
+            axis,
+            truncation_halfwidth(float(sigma2), float(c), truncate_eps),
         )
         return out
     onehot = np.zeros((m, n_labels))

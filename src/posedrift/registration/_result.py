@@ -101,7 +101,9 @@ class CPDResult:
             to the inlier share of each target point (``1 - P(outlier | x_n)``), not to 1:
             a target point far from every source point has a small row. Normalize the
             rows yourself if you need a distribution. Computed in blocks from the final
-            posterior (never an M x N array).
+            posterior (never an M x N array); where the compiled kernel is built, each
+            entry to 1e-12 (source points whose kernel value is below 1e-12 of the
+            outlier term are left out, as in the E-step).
         """
         m = self._moved_n.shape[0]
         n_labels = int(
@@ -126,7 +128,13 @@ class CPDResult:
                 f"Got values in [{lab.min()}, {lab.max()}] instead."
             )
         return _estep.posterior_label_mass(
-            self._target_n, self._moved_n, self._sigma2_n, self._outlier_c, lab, n_labels
+            self._target_n,
+            self._moved_n,
+            self._sigma2_n,
+            self._outlier_c,
+            lab,
+            n_labels,
+            truncate_eps=_estep.TRUNCATE_EPS,
         )
 
     def apply(self, points) -> np.ndarray:
