@@ -346,6 +346,31 @@ def test_compiled_label_mass_matches_numpy_twin(d):
         _estep._cestep.label_mass(x, t, 210, 190, d, 1.0, 0.0, labels, 15, np.empty((210, 14)))
 
 
+@pytest.mark.skipif(not _estep.has_compiled_kernel(), reason="compiled E-step not built")
+@pytest.mark.parametrize("d", [1, 3, 5])
+def test_compiled_gaussian_kernel_matches_numpy(d):
+    from posedrift.registration import _cpd
+
+    rng = np.random.default_rng(d)
+    a, b = rng.normal(size=(130, d)), rng.normal(size=(70, d))
+    for beta in (0.05, 0.7, 3.0):
+        got = _cpd.gaussian_kernel(a, b, beta)
+        ref = _cpd.gaussian_kernel(a, b, beta, compiled=False)
+        # Both exponentials are good to a few ulps times the exponent; NumPy's expanded
+        # |a|^2 + |b|^2 - 2 a.b also rounds by an ulp of |a|^2 + |b|^2 (over 2 beta^2)
+        scale = 2 * beta**2
+        exponent = ((a[:, None] - b[None]) ** 2).sum(-1) / scale
+        norms = ((a**2).sum(1)[:, None] + (b**2).sum(1)[None]) / scale
+        bound = 4e-15 * (1 + exponent) + 1e-15 * norms
+        kept = exponent < 690  # beyond, the kernel clamps at exp(-700); both are ~0
+        assert (np.abs(got[kept] / ref[kept] - 1) <= bound[kept]).all()
+        assert (got[~kept] < 1e-299).all() and (ref[~kept] < 1e-299).all()
+    # identity: a point's kernel with itself is 1; far points are (clamped) zero
+    assert np.array_equal(np.diag(_cpd.gaussian_kernel(a, a, 0.5)), np.ones(130))
+    assert _cpd.gaussian_kernel(a, a + 1e3, 0.5).max() < 1e-300
+    assert _cpd.gaussian_kernel(a[:0], b, 1.0).shape == (0, 70)
+
+
 def test_numpy_estep_blocks_agree(monkeypatch):
     rng = np.random.default_rng(0)
     x, t = rng.normal(size=(300, 3)), rng.normal(size=(50, 3))

@@ -33,9 +33,15 @@
  *   `axis` and a target point sums only those within h of it along the axis: the terms
  *   left out are each below eps c, so every entry moves by less than eps.
  *
+ * gauss(a, b, i, j, d, scale, out)
+ *   The Gaussian kernel matrix out[i, j] = exp(scale |a_i - b_j|^2) (scale = -1 / (2
+ *   beta^2) < 0), a (I, D) and b (J, D) float64, out (I, J) float64; squared differences
+ *   summed over the coordinates, exponents clamped at -700 (CPD's Nystrom factor).
+ *
  * The NumPy twins are posedrift.registration._estep.estep_numpy,
  * posedrift.registration._estep.posterior_label_mass (compiled=False) and
- * posedrift.registration._cpd._solve_low_rank; tests compare them. Plain buffer protocol
+ * posedrift.registration._cpd._solve_low_rank (and gaussian_kernel's NumPy path); tests
+ * compare them. Plain buffer protocol
  * (no NumPy C API). The float64 exponential is a vectorizable Cody-Waite reduction to
  * |r| <= ln(2)/4 (a half-integer power of two) with a degree-10 Taylor polynomial
  * (relative error ~1e-16 on the clamped range [-700, 0]); the float32 one reduces to
@@ -766,6 +772,58 @@ done:
     return result;
 }
 
+/* out (I, J) = exp(scale |a_i - b_j|^2); bt (D, J) is b transposed. */
+MULTIVERSION
+static void gauss_f64(const double *a, const double *bt, Py_ssize_t ni, Py_ssize_t nj,
+                      Py_ssize_t d, double scale, double *out) {
+    for (Py_ssize_t i = 0; i < ni; ++i) {
+        double *row = out + i * nj;
+        squared_distances(a + i * d, bt, nj, nj, d, row);
+#pragma omp simd
+        for (Py_ssize_t j = 0; j < nj; ++j) {
+            double z = scale * row[j];
+            z = z < -700.0 ? -700.0 : z;
+            row[j] = fast_exp(z);
+        }
+    }
+}
+
+static PyObject *py_gauss(PyObject *self, PyObject *args) {
+    Py_buffer ba, bb, bout;
+    Py_ssize_t ni, nj, d;
+    double scale;
+    if (!PyArg_ParseTuple(args, "y*y*nnndw*", &ba, &bb, &ni, &nj, &d, &scale, &bout))
+        return NULL;
+    PyObject *result = NULL;
+    double *bt = NULL;
+    if (ni < 0 || nj < 0 || d < 1 || !(scale <= 0.0)) {
+        PyErr_SetString(PyExc_ValueError, "_cestep.gauss: need i, j >= 0, d >= 1, scale <= 0");
+        goto done;
+    }
+    if (check_buf(&ba, ni * d, 8, "gauss", "a") || check_buf(&bb, nj * d, 8, "gauss", "b") ||
+        check_buf(&bout, ni * nj, 8, "gauss", "out"))
+        goto done;
+    bt = (double *)malloc((size_t)(d * nj + 1) * sizeof(double));
+    if (!bt) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    const double *a = (const double *)ba.buf, *b = (const double *)bb.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t j = 0; j < nj; ++j)
+        for (Py_ssize_t k = 0; k < d; ++k) bt[k * nj + j] = b[j * d + k];
+    gauss_f64(a, bt, ni, nj, d, scale, (double *)bout.buf);
+    Py_END_ALLOW_THREADS
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    free(bt);
+    PyBuffer_Release(&ba);
+    PyBuffer_Release(&bb);
+    PyBuffer_Release(&bout);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"estep", py_estep, METH_VARARGS,
      "estep(target, moved, n, m, d, sigma2, c, eps, single, p1, pt1, px, order[, target_order])"
@@ -773,6 +831,8 @@ static PyMethodDef methods[] = {
     {"lowrank_mstep", py_lowrank_mstep, METH_VARARGS,
      "lowrank_mstep(zt, m, k, d, p1, px, source, reg, u, moved)"
      " -> (ok, sum PX . moved, sum P1 |moved|^2)"},
+    {"gauss", py_gauss, METH_VARARGS,
+     "gauss(a, b, i, j, d, scale, out) -> None: the Gaussian kernel matrix"},
     {"label_mass", py_label_mass, METH_VARARGS,
      "label_mass(target, moved, n, m, d, sigma2, c, labels, n_labels, out[, axis, h]) -> None"},
     {NULL, NULL, 0, NULL}};
