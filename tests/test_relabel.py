@@ -336,6 +336,29 @@ def test_distances_and_relabel_equal_the_reference(compiled, monkeypatch):
                         assert np.array_equal(got, ref)
 
 
+def test_compiled_part_distances_match_the_numpy_path():
+    from posedrift.labelling import _relabel
+
+    if _relabel._ckernels is None:
+        pytest.skip("the compiled kernels are not built (no C compiler at install)")
+    rng = np.random.default_rng(13)
+    for pts in _clouds():
+        graph = geodesic_graph(pts)
+        labels = rng.integers(-1, 15, size=len(pts))
+        labels[labels == 3] = 4  # a part without points: its anchors take the nearest point
+        for anchors in _anchor_sets(pts, rng):
+            reach = rng.uniform(0.0, 0.4, size=15)
+            reach[2] = np.nan  # exact distances for that part's runs
+            for lab in (None, labels):
+                for r in (None, reach):
+                    got = _relabel._part_distances(graph, pts, anchors, lab, r)
+                    ref = _relabel._part_distances(graph, pts, anchors, lab, r, compiled=False)
+                    assert np.array_equal(got, ref)
+    # No anchor at all: every part infinitely far.
+    none = np.full((15, 3), np.nan)
+    assert np.isinf(_relabel._part_distances(graph, pts, none, None)).all()
+
+
 def test_compiled_dijkstra_matches_scipy_and_honours_limits():
     from scipy.sparse.csgraph import dijkstra
 

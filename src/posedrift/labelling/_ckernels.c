@@ -57,6 +57,19 @@
  *            in their first nnz entries: each row's columns ascending, every edge in
  *            both of its rows once (found from both ends, it has the same length)
  *
+ * part_distances(points, n, anchors, n_anchors, k, labels, reach, indptr, indices, data, out)
+ *   relabelling's _part_distances in one call: each anchor's source vertex (the nearest
+ *   point carrying its part's label where the part has points, else the nearest point),
+ *   a Dijkstra run per distinct source (exact within the largest reach of its anchors
+ *   less their gaps, plus 1e-9 and 1e-12 of it), and per part the smallest over its
+ *   anchors of run + gap. The same doubles as the NumPy code.
+ *   points  : (n, 3) float64; anchors: (n_anchors, 3) float64, part j's k anchors in rows
+ *             j k .. j k + k - 1, a NaN row for a missing one
+ *   labels  : (n,) int64, or an empty buffer for none; reach: (n_anchors / k,) float64,
+ *             or an empty buffer for exact distances everywhere
+ *   out     : (n_anchors / k, n) float64, written; inf for unreachable points and parts
+ *             without anchors
+ *
  * The twins are scipy's dijkstra and cKDTree, the NumPy descent and JointVotes.cast's NumPy path; tests/test_relabel.py and
  * tests/test_forest.py and tests/test_votes.py compare them. Plain buffer protocol (no NumPy C API). Build with
  * plain -O2/-O3: it relies on IEEE infinities and float32 rounding, so never with
@@ -119,6 +132,47 @@ static int get_buffer(PyObject *obj, Py_buffer *view, int writable, Py_ssize_t i
         return -1;
     }
     return 0;
+}
+
+/* One Dijkstra run from `source` into dist (n), exact within `limit` (see dijkstra);
+ * heap: nnz + 1 items, queue: n + 1 vertices of work space. */
+static void dijkstra_run(const int32_t *indptr, const int32_t *indices, const double *data,
+                         Py_ssize_t n, int32_t source, double limit, double *dist, item *heap,
+                         int32_t *queue) {
+    for (Py_ssize_t v = 0; v < n; v++) dist[v] = INFINITY;
+    Py_ssize_t size = 0, tail = 0;
+    dist[source] = 0.0;
+    heap_push(heap, &size, 0.0, source);
+    while (size > 0) {
+        item top = heap_pop(heap, &size);
+        if (top.key > dist[top.node]) continue; /* stale entry */
+        const double d = top.key;
+        for (int32_t e = indptr[top.node]; e < indptr[top.node + 1]; e++) {
+            const int32_t v = indices[e];
+            const double nd = d + data[e];
+            if (nd <= limit) {
+                if (nd < dist[v]) {
+                    dist[v] = nd;
+                    heap_push(heap, &size, nd, v);
+                }
+            } else if (dist[v] == INFINITY) {
+                dist[v] = nd; /* beyond the limit: reachable, not exact */
+                queue[tail++] = v;
+            }
+        }
+    }
+    /* Breadth first over the rest: any path length, all above the limit. */
+    for (Py_ssize_t head = 0; head < tail; head++) {
+        const int32_t u = queue[head];
+        if (!(dist[u] > limit)) continue; /* lowered within the limit since */
+        for (int32_t e = indptr[u]; e < indptr[u + 1]; e++) {
+            const int32_t v = indices[e];
+            if (dist[v] == INFINITY) {
+                dist[v] = dist[u] + data[e];
+                queue[tail++] = v;
+            }
+        }
+    }
 }
 
 static PyObject *dijkstra(PyObject *self, PyObject *args) {
@@ -202,44 +256,9 @@ static PyObject *dijkstra(PyObject *self, PyObject *args) {
         return PyErr_NoMemory();
     }
     Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t s = 0; s < n_sources; s++) {
-        double *dist = out + s * n;
-        const double limit = limits[s];
-        for (Py_ssize_t v = 0; v < n; v++) dist[v] = INFINITY;
-        Py_ssize_t size = 0, tail = 0;
-        dist[sources[s]] = 0.0;
-        heap_push(heap, &size, 0.0, (int32_t)sources[s]);
-        while (size > 0) {
-            item top = heap_pop(heap, &size);
-            if (top.key > dist[top.node]) continue; /* stale entry */
-            const double d = top.key;
-            for (int32_t e = indptr[top.node]; e < indptr[top.node + 1]; e++) {
-                const int32_t v = indices[e];
-                const double nd = d + data[e];
-                if (nd <= limit) {
-                    if (nd < dist[v]) {
-                        dist[v] = nd;
-                        heap_push(heap, &size, nd, v);
-                    }
-                } else if (dist[v] == INFINITY) {
-                    dist[v] = nd; /* beyond the limit: reachable, not exact */
-                    queue[tail++] = v;
-                }
-            }
-        }
-        /* Breadth first over the rest: any path length, all above the limit. */
-        for (Py_ssize_t head = 0; head < tail; head++) {
-            const int32_t u = queue[head];
-            if (!(dist[u] > limit)) continue; /* lowered within the limit since */
-            for (int32_t e = indptr[u]; e < indptr[u + 1]; e++) {
-                const int32_t v = indices[e];
-                if (dist[v] == INFINITY) {
-                    dist[v] = dist[u] + data[e];
-                    queue[tail++] = v;
-                }
-            }
-        }
-    }
+    for (Py_ssize_t s = 0; s < n_sources; s++)
+        dijkstra_run(indptr, indices, data, n, (int32_t)sources[s], limits[s], out + s * n, heap,
+                     queue);
     Py_END_ALLOW_THREADS
     free(heap);
     free(queue);
@@ -719,6 +738,153 @@ static PyObject *graph_csr(PyObject *self, PyObject *args) {
     return PyLong_FromSsize_t(nnz);
 }
 
+static PyObject *part_distances(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *o_points, *o_anchors, *o_labels, *o_reach, *o_indptr, *o_indices, *o_data, *o_out;
+    Py_ssize_t n, n_anchors, k;
+    if (!PyArg_ParseTuple(args, "OnOnnOOOOOO", &o_points, &n, &o_anchors, &n_anchors, &k,
+                          &o_labels, &o_reach, &o_indptr, &o_indices, &o_data, &o_out))
+        return NULL;
+    if (n < 1 || n > INT32_MAX || k < 1 || n_anchors < 0 || n_anchors % k != 0) {
+        PyErr_SetString(PyExc_ValueError, "part_distances: bad n, n_anchors or k");
+        return NULL;
+    }
+    const Py_ssize_t n_parts = n_anchors / k;
+    Py_buffer b[8];
+    PyObject *objs[8] = {o_points, o_anchors, o_labels, o_reach, o_indptr, o_indices, o_data, o_out};
+    const Py_ssize_t items[8] = {8, 8, 8, 8, 4, 4, 8, 8};
+    int got = 0, ok = 1;
+    for (; got < 8 && ok; got++) {
+        Py_ssize_t count;
+        switch (got) {
+        case 0: count = 3 * n; break;
+        case 1: count = 3 * n_anchors; break;
+        case 2: count = 0; break; /* labels: n or none, checked below */
+        case 3: count = 0; break; /* reach: n_parts or none */
+        case 4: count = n + 1; break;
+        case 5: count = ((const int32_t *)b[4].buf)[n]; break;
+        case 6: count = ((const int32_t *)b[4].buf)[n]; break;
+        default: count = n_parts * n;
+        }
+        if (count < 0 ||
+            get_buffer(objs[got], &b[got], got == 7, items[got], count, "part_distances") < 0) {
+            if (count < 0) PyErr_SetString(PyExc_ValueError, "part_distances: bad indptr");
+            ok = 0;
+            break;
+        }
+    }
+    const int has_labels = ok && b[2].len > 0, has_reach = ok && b[3].len > 0;
+    if (ok && ((has_labels && b[2].len != 8 * n) || (has_reach && b[3].len != 8 * n_parts))) {
+        PyErr_SetString(PyExc_ValueError, "part_distances: 'labels' or 'reach' has the wrong size");
+        ok = 0;
+    }
+    const int32_t *indptr = ok ? (const int32_t *)b[4].buf : NULL;
+    const int32_t *indices = ok ? (const int32_t *)b[5].buf : NULL;
+    const Py_ssize_t nnz = ok ? indptr[n] : 0;
+    for (Py_ssize_t e = 0; e < nnz && ok; e++)
+        if (indices[e] < 0 || indices[e] >= n || !(((const double *)b[6].buf)[e] >= 0.0)) ok = 0;
+    for (Py_ssize_t v = 0; v < n && ok; v++)
+        if (indptr[v] > indptr[v + 1] || indptr[v] < 0) ok = 0;
+    if (!ok && !PyErr_Occurred())
+        PyErr_SetString(PyExc_ValueError, "part_distances: invalid graph (indices, lengths)");
+    /* work: per anchor its source and gap; per point its run's slot; per slot its limit and
+     * distances; the heap and queue of the runs */
+    int32_t *source = NULL, *slot_of = NULL, *queue = NULL;
+    double *gap = NULL, *limit = NULL, *runs = NULL;
+    unsigned char *has = NULL;
+    item *heap = NULL;
+    if (ok) {
+        source = (int32_t *)malloc(sizeof(int32_t) * (size_t)(n_anchors + 1));
+        slot_of = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
+        queue = (int32_t *)malloc(sizeof(int32_t) * (size_t)(n + 1));
+        gap = (double *)malloc(sizeof(double) * (size_t)(n_anchors + 1));
+        limit = (double *)malloc(sizeof(double) * (size_t)(n_anchors + 1));
+        runs = (double *)malloc(sizeof(double) * (size_t)((n_anchors + 1) * n));
+        has = (unsigned char *)calloc((size_t)(n_parts + 1), 1);
+        heap = (item *)malloc(sizeof(item) * (size_t)(nnz + 1));
+        if (!source || !slot_of || !queue || !gap || !limit || !runs || !has || !heap) {
+            ok = 0;
+            PyErr_NoMemory();
+        }
+    }
+    if (ok) {
+        const double *p = (const double *)b[0].buf, *anc = (const double *)b[1].buf;
+        const int64_t *lab = has_labels ? (const int64_t *)b[2].buf : NULL;
+        const double *reach = has_reach ? (const double *)b[3].buf : NULL;
+        const double *data = (const double *)b[6].buf;
+        double *out = (double *)b[7].buf;
+        Py_BEGIN_ALLOW_THREADS
+        if (lab)
+            for (Py_ssize_t v = 0; v < n; v++)
+                if (lab[v] >= 0 && lab[v] < n_parts) has[lab[v]] = 1;
+        for (Py_ssize_t v = 0; v < n; v++) slot_of[v] = -1;
+        Py_ssize_t n_slots = 0;
+        for (Py_ssize_t a = 0; a < n_anchors; a++) {
+            const double ax = anc[3 * a], ay = anc[3 * a + 1], az = anc[3 * a + 2];
+            source[a] = -1;
+            if (!(isfinite(ax) && isfinite(ay) && isfinite(az))) continue;
+            const Py_ssize_t part = a / k;
+            const int own = lab != NULL && has[part];
+            /* the first nearest, as np.argmin over the row with the others at +inf
+             * (index 0 where every candidate is infinitely far) */
+            double best = INFINITY;
+            int32_t arg = 0;
+            for (Py_ssize_t v = 0; v < n; v++) {
+                if (own && lab[v] != part) continue;
+                const double dx = ax - p[3 * v], dy = ay - p[3 * v + 1], dz = az - p[3 * v + 2];
+                const double d2 = dx * dx + dy * dy + dz * dz;
+                if (d2 < best) {
+                    best = d2;
+                    arg = (int32_t)v;
+                }
+            }
+            source[a] = arg;
+            gap[a] = sqrt(best);
+            if (slot_of[arg] < 0) {
+                slot_of[arg] = (int32_t)n_slots;
+                limit[n_slots++] = -INFINITY;
+            }
+            if (reach) { /* np.fmax: a NaN reach leaves the limit as it is */
+                const double l = reach[part] - gap[a];
+                if (l > limit[slot_of[arg]]) limit[slot_of[arg]] = l;
+            }
+        }
+        for (Py_ssize_t q = 0; q < n_slots; q++) {
+            const double l = limit[q];
+            limit[q] = (reach && l > -INFINITY) ? (l + 1e-9) + 1e-12 * fabs(l) : INFINITY;
+        }
+        for (Py_ssize_t v = 0; v < n; v++)
+            if (slot_of[v] >= 0)
+                dijkstra_run(indptr, indices, data, n, (int32_t)v, limit[slot_of[v]],
+                             runs + (Py_ssize_t)slot_of[v] * n, heap, queue);
+        for (Py_ssize_t j = 0; j < n_parts; j++) {
+            double *row = out + j * n;
+            for (Py_ssize_t v = 0; v < n; v++) row[v] = INFINITY;
+            for (Py_ssize_t a = j * k; a < j * k + k; a++) {
+                if (source[a] < 0) continue;
+                const double *run = runs + (Py_ssize_t)slot_of[source[a]] * n;
+                const double g = gap[a];
+                for (Py_ssize_t v = 0; v < n; v++) {
+                    const double val = run[v] + g;
+                    if (val < row[v]) row[v] = val;
+                }
+            }
+        }
+        Py_END_ALLOW_THREADS
+    }
+    free(source);
+    free(slot_of);
+    free(queue);
+    free(gap);
+    free(limit);
+    free(runs);
+    free(has);
+    free(heap);
+    for (int q = 0; q < got; q++) PyBuffer_Release(&b[q]);
+    if (!ok) return NULL;
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef methods[] = {
     {"descend", descend, METH_VARARGS,
      "descend(table, image, rows, cols, row_scale, col_scale, roots, levels, height, width, "
@@ -731,6 +897,9 @@ static PyMethodDef methods[] = {
     {"graph_csr", graph_csr, METH_VARARGS,
      "graph_csr(points, n, kk, dist, idx, limit, depth_step, indptr, indices, data) -> nnz: "
      "the k-NN graph as a symmetric CSR matrix."},
+    {"part_distances", part_distances, METH_VARARGS,
+     "part_distances(points, n, anchors, n_anchors, k, labels, reach, indptr, indices, data, "
+     "out): relabelling's geodesic distance of every point from every part."},
     {"dijkstra", dijkstra, METH_VARARGS,
      "dijkstra(indptr, indices, data, n, sources, limits, out): multi-run Dijkstra."},
     {NULL, NULL, 0, NULL}};

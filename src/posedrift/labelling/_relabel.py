@@ -221,18 +221,38 @@ def _part_distances(
     anchors: np.ndarray,
     labels: np.ndarray | None,
     reach: np.ndarray | None = None,
+    compiled: bool = True,
 ) -> np.ndarray:
     """:func:`geodesic_distances`, optionally exact only up to each part's ``reach``.
 
     With ``reach`` (J,) metres, a part's distance is exact where it is at most
     ``reach[j]``; elsewhere it is the length of some path, above ``reach[j]`` (finite
     exactly where the point is reachable), which lets the searches stop early.
+    ``compiled``: the compiled kernel where built (the same doubles as the code below).
     """
     anchors = np.asarray(anchors, dtype=float)
     if anchors.ndim == 2:
         anchors = anchors[:, None, :]
     n_parts, k = anchors.shape[:2]
     flat = anchors.reshape(-1, 3)
+    if compiled and _ckernels is not None and len(points):
+        # The same doubles in one compiled call (sources, runs, minimum over anchors).
+        matrix = graph.matrix
+        out = np.empty((n_parts, len(points)))
+        _ckernels.part_distances(
+            np.ascontiguousarray(points, dtype=np.float64),
+            len(points),
+            np.ascontiguousarray(flat),
+            len(flat),
+            k,
+            np.empty(0) if labels is None else np.ascontiguousarray(labels, dtype=np.int64),
+            np.empty(0) if reach is None else np.ascontiguousarray(reach, dtype=np.float64),
+            np.ascontiguousarray(matrix.indptr, dtype=np.int32),
+            np.ascontiguousarray(matrix.indices, dtype=np.int32),
+            np.ascontiguousarray(matrix.data, dtype=np.float64),
+            out,
+        )
+        return out
     part_of = np.repeat(np.arange(n_parts), k)
     valid = np.flatnonzero(np.isfinite(flat).all(axis=1))
     if len(valid) == 0:
@@ -247,7 +267,8 @@ def _part_distances(
         # beyond it every path, hence every value, is longer than the reach.
         limits = np.full(len(unique), -np.inf)
         np.fmax.at(limits, inverse, reach[part_of] - gap)
-        limits = limits + 1e-9 + 1e-12 * np.abs(limits)
+        with np.errstate(invalid="ignore"):  # -inf (only NaN reaches) + inf: NaN
+            limits = limits + 1e-9 + 1e-12 * np.abs(limits)
         limits[~(limits > -np.inf)] = np.inf  # a NaN reach: exact distances
     geo = _dijkstra(graph.matrix, unique, limits)[inverse]
     geo += gap[:, None]
