@@ -41,11 +41,11 @@
  * The NumPy twins are posedrift.registration._estep.estep_numpy,
  * posedrift.registration._estep.posterior_label_mass (compiled=False) and
  * posedrift.registration._cpd._solve_low_rank (and gaussian_kernel's NumPy path); tests
- * compare them. Plain buffer protocol
- * (no NumPy C API). The float64 exponential is a vectorizable Cody-Waite reduction to
- * |r| <= ln(2)/4 (a half-integer power of two) with a degree-10 Taylor polynomial
- * (relative error ~1e-16 on the clamped range [-700, 0]); the float32 one reduces to
- * |r| <= ln(2)/2 with degree 7 (~1e-8 relative, below float32's rounding).
+ * compare them. Plain buffer protocol (no NumPy C API). The float64 exponential is a
+ * vectorizable Cody-Waite reduction to |r| <= ln(2)/4 (a half-integer power of two) with
+ * a degree-10 Taylor polynomial (relative error ~1e-16 on the clamped range [-700, 0]);
+ * the float32 one reduces to |r| <= ln(2)/2 with degree 7 (~1e-8 relative, below
+ * float32's rounding).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
