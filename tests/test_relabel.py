@@ -357,6 +357,14 @@ def test_compiled_part_distances_match_the_numpy_path():
     # No anchor at all: every part infinitely far.
     none = np.full((15, 3), np.nan)
     assert np.isinf(_relabel._part_distances(graph, pts, none, None)).all()
+    m, n = graph.matrix, len(pts)
+    with pytest.raises(ValueError, match="buffer 'out'"):
+        _relabel._ckernels.part_distances(
+            pts, n, none, 15, 1, np.empty(0), np.empty(0), m.indptr, m.indices, m.data,
+            np.empty((14, n)),
+        )  # fmt: skip
+    with pytest.raises(ValueError, match="buffer 'idx'"):
+        _relabel._ckernels.knn(pts, n, 2, np.empty((n, 2)), np.empty((n, 1), dtype=np.int64))
 
 
 def test_compiled_dijkstra_matches_scipy_and_honours_limits():

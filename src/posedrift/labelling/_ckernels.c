@@ -126,7 +126,7 @@ static int get_buffer(PyObject *obj, Py_buffer *view, int writable, Py_ssize_t i
     if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | (writable ? PyBUF_WRITABLE : 0)) < 0)
         return -1;
     if (view->itemsize != itemsize || view->len < itemsize * count) {
-        PyErr_Format(PyExc_ValueError, "dijkstra: buffer '%s' has the wrong size or item size",
+        PyErr_Format(PyExc_ValueError, "_ckernels: buffer '%s' has the wrong size or item size",
                      name);
         PyBuffer_Release(view);
         return -1;
@@ -753,6 +753,8 @@ static PyObject *part_distances(PyObject *self, PyObject *args) {
     Py_buffer b[8];
     PyObject *objs[8] = {o_points, o_anchors, o_labels, o_reach, o_indptr, o_indices, o_data, o_out};
     const Py_ssize_t items[8] = {8, 8, 8, 8, 4, 4, 8, 8};
+    const char *names[8] = {"points", "anchors", "labels", "reach",
+                            "indptr", "indices", "data",   "out"};
     int got = 0, ok = 1;
     for (; got < 8 && ok; got++) {
         Py_ssize_t count;
@@ -767,7 +769,7 @@ static PyObject *part_distances(PyObject *self, PyObject *args) {
         default: count = n_parts * n;
         }
         if (count < 0 ||
-            get_buffer(objs[got], &b[got], got == 7, items[got], count, "part_distances") < 0) {
+            get_buffer(objs[got], &b[got], got == 7, items[got], count, names[got]) < 0) {
             if (count < 0) PyErr_SetString(PyExc_ValueError, "part_distances: bad indptr");
             ok = 0;
             break;
