@@ -1,6 +1,6 @@
 """Build the optional compiled kernels (``posedrift.registration._cestep``,
 ``posedrift.labelling._ckernels``, ``posedrift.skeleton._cmeanshift``,
-``posedrift.points._csegment``).
+``posedrift.points._cpoints``).
 
 Metadata lives in ``pyproject.toml``; this file only declares the C extensions (CPD's
 fused E-step in float64 and float32, its low-rank M-step and its label transfer;
@@ -38,8 +38,8 @@ setup(
         ),
         # The segmentation's connected components. Plain -O3: float32 compared as NumPy does.
         Extension(
-            "posedrift.points._csegment",
-            sources=["src/posedrift/points/_csegment.c"],
+            "posedrift.points._cpoints",
+            sources=["src/posedrift/points/_cpoints.c"],
             extra_compile_args=["-O3"],
             optional=True,
         ),

@@ -320,7 +320,7 @@ def test_segment_equals_the_reference(varied_frames):
 def test_compiled_components_match_the_numpy_twin(varied_frames):
     from posedrift.points import _segment
 
-    if _segment._csegment is None:
+    if _segment._cpoints is None:
         pytest.skip("the compiled segmentation kernel is not built (no C compiler at install)")
     rng = np.random.default_rng(2)
     cases = []
@@ -387,5 +387,7 @@ def test_voxel_centroids_equal_the_reference():
     clouds = [backproject(depth, K)[0], rng.uniform(size=(3000, 3)) * 50, rng.normal(size=(1, 3))]
     for pts in clouds:
         for size in (0.005, 0.03, 0.2):  # the sparse grids take the np.unique path
-            got, ref = _voxel_centroids(pts, size), _reference_voxels(pts, size)
-            assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1])
+            ref = _reference_voxels(pts, size)
+            for compiled in (True, False):  # the kernel (where built) and its twin
+                got = _voxel_centroids(pts, size, compiled=compiled)
+                assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1])

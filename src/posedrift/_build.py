@@ -8,7 +8,7 @@ KERNELS = (
     "posedrift.registration._cestep",
     "posedrift.labelling._ckernels",
     "posedrift.skeleton._cmeanshift",
-    "posedrift.points._csegment",
+    "posedrift.points._cpoints",
 )
 """The C extensions; each has a NumPy twin that runs where it was not built."""
 

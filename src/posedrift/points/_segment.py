@@ -12,9 +12,9 @@ from posedrift._validation import check_rng, check_scalar
 from posedrift.camera import DepthFrame, Intrinsics
 
 try:  # the compiled kernel is optional: built by ``pip install -e .`` when a compiler exists
-    from posedrift.points import _csegment  # type: ignore[attr-defined]
+    from posedrift.points import _cpoints  # type: ignore[attr-defined]
 except ImportError:  # pragma: no cover - depends on the build
-    _csegment = None
+    _cpoints = None
 
 
 class BackgroundModel:
@@ -261,9 +261,9 @@ def _components(
     ``depth`` is float32 (as :func:`segment_person` makes it). The compiled kernel, where
     built, gives the same labels as the NumPy and SciPy code below.
     """
-    if compiled and _csegment is not None and depth.dtype == np.float32:
+    if compiled and _cpoints is not None and depth.dtype == np.float32:
         labels = np.empty(mask.shape, dtype=np.int32)
-        count = _csegment.components(
+        count = _cpoints.components(
             np.ascontiguousarray(mask, dtype=np.uint8),
             np.ascontiguousarray(depth),
             mask.shape[0],
