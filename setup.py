@@ -6,7 +6,7 @@ Metadata lives in ``pyproject.toml``; this file only declares the C extensions (
 fused E-step in float64 and float32, its low-rank M-step and its label transfer;
 relabelling's k-NN graph and Dijkstra, the forest's per-point descent and its joint votes'
 casting; the grouped mean shift of the part modes and the votes; the segmentation's
-connected components). They use the plain buffer protocol (no NumPy C API), so NumPy
+connected components and the downsampling's voxel centroids). They use the plain buffer protocol (no NumPy C API), so NumPy
 is not a build requirement. Each is optional: when one cannot be compiled the install
 still succeeds and posedrift falls back to its NumPy twins.
 """
@@ -36,7 +36,8 @@ setup(
             extra_compile_args=["-O3"],
             optional=True,
         ),
-        # The segmentation's connected components. Plain -O3: float32 compared as NumPy does.
+        # The segmentation's components and the voxel centroids. Plain -O3: float32 compared
+        # and doubles summed as NumPy does.
         Extension(
             "posedrift.points._cpoints",
             sources=["src/posedrift/points/_cpoints.c"],
