@@ -70,10 +70,11 @@
  *   out     : (n_anchors / k, n) float64, written; inf for unreachable points and parts
  *             without anchors
  *
- * The twins are scipy's dijkstra and cKDTree, the NumPy descent and JointVotes.cast's NumPy path; tests/test_relabel.py and
- * tests/test_forest.py and tests/test_votes.py compare them. Plain buffer protocol (no NumPy C API). Build with
- * plain -O2/-O3: it relies on IEEE infinities and float32 rounding, so never with
- * -ffast-math or -ffinite-math-only.
+ * The twins are scipy's dijkstra and cKDTree, geodesic_graph's and _part_distances'
+ * NumPy code, the NumPy descent and JointVotes.cast's NumPy path; tests/test_relabel.py,
+ * tests/test_forest.py and tests/test_votes.py compare them. Plain buffer protocol (no
+ * NumPy C API). Build with plain -O2/-O3: it relies on IEEE infinities and float32
+ * rounding, so never with -ffast-math or -ffinite-math-only.
  */
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC optimize("fp-contract=off")
