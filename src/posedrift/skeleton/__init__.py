@@ -48,6 +48,7 @@ from posedrift.skeleton._fit import (
     bone_anchors,
     fit_skeleton,
     part_anchors,
+    parts_at_image_edge,
     prior_bone_lengths,
     refine_with_votes,
 )
@@ -59,6 +60,7 @@ __all__ += [
     "fit_skeleton",
     "part_anchors",
     "part_modes",
+    "parts_at_image_edge",
     "prior_bone_lengths",
     "refine_with_votes",
 ]

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from posedrift.camera import Intrinsics, project
 from posedrift.skeleton._definitions import (
     JOINT_INDEX,
     JOINT_PARENTS,
@@ -223,6 +224,45 @@ def _part_sums(lab: np.ndarray, values: np.ndarray) -> np.ndarray:
     return np.bincount(bins, weights=values.ravel(), minlength=k * N_PARTS).reshape(N_PARTS, k)
 
 
+def parts_at_image_edge(
+    points: np.ndarray,
+    labels: np.ndarray,
+    intrinsics: Intrinsics,
+    *,
+    margin: float = 1.0,
+    voxel_size: float = 0.0,
+) -> np.ndarray:
+    """Which parts reach the image's edge (are cut off by it): ``(15,)`` bool.
+
+    Parameters
+    ----------
+    points : (N, 3) float
+        Camera-frame points in metres.
+    labels : (N,) int
+        Part of each point; labels outside 0-14 are ignored.
+    intrinsics : Intrinsics
+        The camera whose image the points come from.
+    margin : float
+        A point within this many pixels of the border is at the edge (1: a point
+        back-projected from a border pixel).
+    voxel_size : float
+        Where the points are centroids of downsampling voxels of this size (metres),
+        the margin grows by a voxel's size in pixels at each point's depth: a
+        centroid lies inside the pixels it stands for.
+    """
+    points = np.asarray(points, dtype=float)
+    uv = project(points, intrinsics)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        margin = margin + voxel_size * intrinsics.fx / points[:, 2]
+    u, v = uv[:, 0], uv[:, 1]
+    at = (u < margin) | (u > intrinsics.width - 1 - margin)
+    at |= (v < margin) | (v > intrinsics.height - 1 - margin)
+    lab = np.asarray(labels)[at]
+    out = np.zeros(N_PARTS, dtype=bool)
+    out[lab[(lab >= 0) & (lab < N_PARTS)]] = True
+    return out
+
+
 def _unit(v: np.ndarray) -> np.ndarray:
     # np.linalg.norm of a 1-D float vector is sqrt(v.dot(v)); this skips its overhead.
     n = math.sqrt(v.dot(v))
@@ -262,6 +302,8 @@ _LIMB_W_AXIS, _LIMB_W_RING = (
     np.array([LIMB_DIRECTION_WEIGHTS[p.split("_", 1)[1]][k] for _, p, _ in _LIMBS])[:, None]
     for k in (0, 1)
 )
+# The two parts meeting at each limb's anchor (its ring joint).
+_LIMB_ANCHOR_PARTS = tuple(np.array([_P[RING_JOINTS[a][k]] for a, _, _ in _LIMBS]) for k in (0, 1))
 _NAN3 = np.full(3, np.nan)
 # RING_JOINTS as arrays: the two parts meeting at each ring joint and its radius.
 _RING_NAMES = tuple(RING_JOINTS)
@@ -341,7 +383,10 @@ def _place_limbs(
     *,
     bone_lengths: np.ndarray,
     counts: np.ndarray,
+    modes: np.ndarray,
     modes_back: np.ndarray,
+    boundaries: np.ndarray,
+    cut: np.ndarray,
     axes: np.ndarray,
     elong: np.ndarray,
     ring: dict[str, tuple[np.ndarray, float]],
@@ -356,12 +401,27 @@ def _place_limbs(
     follows a mix of its part's oriented principal axis (or the direction to the
     part's mode) and the direction to its own ring joint, for its bone length.
     Joints without a direction fall back on the prediction.
+
+    A part cut off by the image's edge (``cut``, per limb) shows a stub whose mode
+    lies close to the anchor; from the pushed-back anchor to the pushed-back mode
+    (``modes_back``) the two push-back radii (ring joint and part) differ, and over
+    so short a distance that difference bends the limb (a shank cut at the knee by
+    the lower edge read 20 degrees bent). Such a limb takes the direction to its
+    mode on the visible surface instead, from the centre of its anchor's boundary
+    (``boundaries``: :func:`part_boundaries`' centres) to the surface mode, which
+    lie about equally far in front of the bone. Whole parts keep the pushed-back
+    direction: between arms that occlude each other, a boundary's centre mixes
+    near and far surfaces.
     """
     ia, part, ij = _LIMB_ANCHOR, _LIMB_PART, _LIMB_JOINT
     lengths = bone_lengths[_LIMB_LENGTH]
     anchor = joints[ia]
     live = _rows_finite(anchor) & (counts[part] >= min_part_points)
     to_mode = _units(modes_back[part] - anchor)
+    if cut.any():
+        on_surface = _units(modes[part] - boundaries[_LIMB_ANCHOR_PARTS])
+        surface = cut & _rows_finite(on_surface)
+        to_mode[surface] = on_surface[surface]
     # The part's axis, turned towards its mode, where the part is elongated enough.
     axis = axes[part]
     use_axis = live & (elong[part] >= min_elongation) & _rows_finite(to_mode)
@@ -483,6 +543,7 @@ def fit_skeleton(
     smoothing: float = 0.0,
     shoulder_anchor: float = 0.3,
     shoulder_offset: np.ndarray | None = None,
+    cut_parts: np.ndarray | None = None,
 ) -> SkeletonFit:
     """Fit the 15-joint skeleton to labelled points with calibrated bone lengths.
 
@@ -526,6 +587,10 @@ def fit_skeleton(
         Where the trunk puts the shoulders: ``(across, below)`` the neck in metres
         (:func:`shoulder_offset_of` a calibration skeleton); the T-pose's geometry
         where not given.
+    cut_parts : (15,) bool, optional
+        Parts cut off by the image's edge (:func:`parts_at_image_edge`): a limb
+        whose part is cut follows the direction to its mode on the visible surface
+        (see ``_place_limbs``). None: no part is cut.
 
     Returns
     -------
@@ -581,7 +646,10 @@ def fit_skeleton(
         measured,
         bone_lengths=bone_lengths,
         counts=counts,
+        modes=modes,
         modes_back=modes_back,
+        boundaries=centres,
+        cut=np.zeros(len(_LIMBS), bool) if cut_parts is None else cut_parts[_LIMB_PART],
         axes=axes,
         elong=elong,
         ring=ring,

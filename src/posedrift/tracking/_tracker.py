@@ -32,6 +32,7 @@ from posedrift.skeleton._fit import (
     SkeletonFit,
     bone_anchors,
     fit_skeleton,
+    parts_at_image_edge,
     refine_with_votes,
 )
 from posedrift.skeleton._meanshift import part_modes
@@ -780,6 +781,7 @@ class PoseTracker:
             height=cal.height,
             smoothing=self.temporal_smoothing,
             shoulder_offset=cal.shoulders,
+            cut_parts=self._parts_at_edge(points, labels),
             **unanchored,
         )
         health = assess(
@@ -804,6 +806,14 @@ class PoseTracker:
         )
         trunk, arm = self.vote_weights
         return refine_with_votes(joints, voted, trunk_weight=trunk, arm_weight=arm)
+
+    def _parts_at_edge(self, points: np.ndarray, labels: np.ndarray) -> np.ndarray:
+        """``(15,)`` whether each part's points reach the image's edge (it is cut off)."""
+        step = self.decimation or working_decimation(self.intrinsics)
+        # One working pixel (``step`` of the camera's) and a voxel from the border.
+        return parts_at_image_edge(
+            points, labels, self.intrinsics, margin=step, voxel_size=self._voxel or 0.0
+        )
 
     def _in_view(self, joints: np.ndarray) -> np.ndarray:
         """``(15,)`` whether each joint projects inside the image (False where unknown)."""
