@@ -35,7 +35,7 @@ from posedrift.labelling import PartPrediction
 from posedrift.labelling._relabel import geodesic_graph
 from posedrift.points import downsample
 from posedrift.skeleton import facing_yaw, joint_angles
-from posedrift.skeleton._fit import fit_skeleton, parts_at_image_edge
+from posedrift.skeleton._fit import fit_skeleton, image_exits
 from posedrift.skeleton._meanshift import part_modes
 from posedrift.synthetic import build_sequence, bvh_motion, procedural_motion
 from posedrift.tracking import PoseTracker
@@ -102,7 +102,7 @@ def true_label_angles(sequence, calibration, n_points: int = 400) -> np.ndarray:
             modes=part_modes(points, labels, bandwidth=0.06),
             height=calibration.height,
             shoulder_offset=calibration.shoulders,
-            cut_parts=parts_at_image_edge(points, labels, frame.intrinsics, voxel_size=voxel),
+            exits=image_exits(points, labels, frame.intrinsics, voxel_size=voxel),
         )
         out[t] = joint_angles(fit.joints)
     return out

@@ -7,7 +7,7 @@ import pytest
 
 from posedrift.labelling import geodesic_graph
 from posedrift.points import downsample
-from posedrift.skeleton import JOINT_INDEX, JOINT_PARENTS, joint_angles, part_modes
+from posedrift.skeleton import ANGLE_NAMES, JOINT_INDEX, JOINT_PARENTS, joint_angles, part_modes
 from posedrift.skeleton._fit import (
     _J,
     _LIMBS,
@@ -21,6 +21,7 @@ from posedrift.skeleton._fit import (
     _anchor_shoulders,
     bone_anchors,
     fit_skeleton,
+    image_exits,
     part_axes,
     part_boundaries,
     prior_bone_lengths,
@@ -29,6 +30,7 @@ from posedrift.skeleton._fit import (
 )
 
 J = JOINT_INDEX
+J_ANGLE = {name: i for i, name in enumerate(ANGLE_NAMES)}
 
 
 def test_part_modes_find_the_dense_cluster():
@@ -64,18 +66,18 @@ def rendered():
     return build_sequence(procedural_motion(), n_frames=150, rng=0)
 
 
-def _frame_points(seq, i, n=400):
+def _frame_points(seq, i, n=400, *, return_voxel_size=False):
     from posedrift.camera import backproject, project
     from posedrift.points import segment_person
     from posedrift.tracking._init import label_template_points
 
     frame = seq.frames[i]
     full, pix = backproject(frame.depth, frame.intrinsics, segment_person(frame))
-    points = downsample(full, n, rng=0)
+    points, voxel = downsample(full, n, rng=0, return_voxel_size=True)
     truth = seq.reference.labels[i].astype(int) - 1
     labels = label_template_points(points, full, truth[pix[:, 0], pix[:, 1]])
     assert np.isfinite(project(points, frame.intrinsics)).all()
-    return points, labels
+    return (points, labels, voxel) if return_voxel_size else (points, labels)
 
 
 def _true_bones(joints):
@@ -202,6 +204,67 @@ def test_prior_bone_lengths_follow_the_ratios():
     assert abs(bones[J["right_elbow"]] - 0.186 * 1.75) < 1e-9
     assert abs(bones[J["left_foot"]] - 0.246 * 1.75) < 1e-9
     assert bones[J["torso"]] == 0.0
+
+
+def test_image_exits_are_where_the_parts_touch_the_border():
+    from posedrift.camera import Intrinsics
+
+    k = Intrinsics(fx=285.6, fy=285.6, cx=159.5, cy=119.5, width=320, height=240)
+
+    def at(u, v, z=2.0):  # the point that projects to pixel (u, v)
+        return [(u - k.cx) * z / k.fx, (v - k.cy) * z / k.fy, z]
+
+    points = np.array(
+        [at(160, 120), at(0, 100), at(200, 239), at(210, 239), at(3, 50), at(319, 10), at(5, 5)]
+    )
+    labels = np.array([1, 11, 12, 12, 5, -1, 20])  # -1 and 20: not parts, ignored
+    exits = image_exits(points, labels, k)
+    assert exits.shape == (N_PARTS, 3)
+    assert np.flatnonzero(np.isfinite(exits[:, 0])).tolist() == [11, 12]
+    assert np.isnan(exits[[0, 1, 5]]).all()
+    np.testing.assert_allclose(exits[11], points[1], atol=1e-12)
+    np.testing.assert_allclose(exits[12], points[2:4].mean(axis=0), atol=1e-12)  # their centroid
+    # A voxel of 2.5 cm is 3.6 pixels at 2 m: the point 3 pixels in is at the edge too.
+    wide = image_exits(points, labels, k, voxel_size=0.025)
+    assert np.flatnonzero(np.isfinite(wide[:, 0])).tolist() == [5, 11, 12]
+    assert np.isnan(image_exits(points[:0], labels[:0], k)).all()
+
+
+@pytest.fixture(scope="module")
+def rendered_near():
+    """The built-in motion 1.6 m from the camera: the shanks are cut off by the lower edge."""
+    from posedrift.synthetic import build_sequence, procedural_motion
+
+    return build_sequence(procedural_motion(), n_frames=150, rng=0, distance=1.6)
+
+
+def test_cut_off_shanks_follow_the_visible_surface(rendered_near):
+    bones = _true_bones(rendered_near.reference.joints[0])
+    knees = [J_ANGLE["left_knee"], J_ANGLE["right_knee"]]
+    before, after = [], []
+    for i in range(0, 150, 15):
+        points, labels, voxel = _frame_points(rendered_near, i, return_voxel_size=True)
+        graph = geodesic_graph(points)
+        options = {"bone_lengths": bones, "edges": (graph.rows, graph.cols)}
+        k = rendered_near.frames[i].intrinsics
+        exits = image_exits(points, labels, k, voxel_size=voxel)
+        assert np.isfinite(exits[[_P["right_shank"], _P["left_shank"]]]).all()
+        assert np.isnan(exits[_P["upper_torso"]]).all()
+        # The shanks leave the image at its lower edge.
+        assert (exits[[_P["right_shank"], _P["left_shank"]], 1] > 0.5).all()
+        plain = fit_skeleton(points, labels, **options)
+        fit = fit_skeleton(points, labels, exits=exits, **options)
+        truth = rendered_near.reference.angles[i]
+        before.append(np.abs(joint_angles(plain.joints) - truth)[knees])
+        after.append(np.abs(joint_angles(fit.joints) - truth)[knees])
+        # Nothing cut: the fit is the one without cut parts, to the last bit.
+        same = fit_skeleton(points, labels, exits=np.full((N_PARTS, 3), np.nan), **options)
+        _assert_same(same, plain)
+    # The straight knees read about 18 degrees bent from the pushed-back stub, about 9
+    # along the surface towards where the shank leaves the image.
+    assert np.mean(before) > 15.0
+    assert np.mean(after) < 11.0
+    assert np.mean(after) < np.mean(before) - 5.0
 
 
 # ---------------------------------------------------------------------------------------------

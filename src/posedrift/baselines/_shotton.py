@@ -136,7 +136,7 @@ class ShottonBaseline:
 
     def process(self, frame: DepthFrame) -> FrameResult:
         """Joints of one frame, from that frame alone (and the first frame's stature)."""
-        from posedrift.skeleton._fit import fit_skeleton, parts_at_image_edge
+        from posedrift.skeleton._fit import fit_skeleton, image_exits
 
         start = time.perf_counter()
         lab = label_frame(frame, self.forest, threshold=self.threshold)
@@ -163,7 +163,7 @@ class ShottonBaseline:
             edges=lab.edges,
             modes=modes,
             prediction=self._last,
-            cut_parts=parts_at_image_edge(lab.points, lab.labels, frame.intrinsics),
+            exits=image_exits(lab.points, lab.labels, frame.intrinsics),
         )
         if np.isfinite(fit.joints).all():
             self._last = fit.joints

@@ -47,8 +47,8 @@ from posedrift.skeleton._fit import (
     SkeletonFit,
     bone_anchors,
     fit_skeleton,
+    image_exits,
     part_anchors,
-    parts_at_image_edge,
     prior_bone_lengths,
     refine_with_votes,
 )
@@ -58,9 +58,9 @@ __all__ += [
     "SkeletonFit",
     "bone_anchors",
     "fit_skeleton",
+    "image_exits",
     "part_anchors",
     "part_modes",
-    "parts_at_image_edge",
     "prior_bone_lengths",
     "refine_with_votes",
 ]

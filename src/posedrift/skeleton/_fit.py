@@ -224,7 +224,7 @@ def _part_sums(lab: np.ndarray, values: np.ndarray) -> np.ndarray:
     return np.bincount(bins, weights=values.ravel(), minlength=k * N_PARTS).reshape(N_PARTS, k)
 
 
-def parts_at_image_edge(
+def image_exits(
     points: np.ndarray,
     labels: np.ndarray,
     intrinsics: Intrinsics,
@@ -232,7 +232,10 @@ def parts_at_image_edge(
     margin: float = 1.0,
     voxel_size: float = 0.0,
 ) -> np.ndarray:
-    """Which parts reach the image's edge (are cut off by it): ``(15,)`` bool.
+    """Where each part leaves the image: ``(15, 3)``, NaN for parts inside it.
+
+    The centroid of each part's points at the image's edge: a part with such
+    points is cut off by the edge (its mode lies on the stub in view).
 
     Parameters
     ----------
@@ -251,15 +254,19 @@ def parts_at_image_edge(
         centroid lies inside the pixels it stands for.
     """
     points = np.asarray(points, dtype=float)
+    labels = np.asarray(labels)
     uv = project(points, intrinsics)
     with np.errstate(divide="ignore", invalid="ignore"):
         margin = margin + voxel_size * intrinsics.fx / points[:, 2]
     u, v = uv[:, 0], uv[:, 1]
     at = (u < margin) | (u > intrinsics.width - 1 - margin)
     at |= (v < margin) | (v > intrinsics.height - 1 - margin)
-    lab = np.asarray(labels)[at]
-    out = np.zeros(N_PARTS, dtype=bool)
-    out[lab[(lab >= 0) & (lab < N_PARTS)]] = True
+    at &= (labels >= 0) & (labels < N_PARTS)
+    out = np.full((N_PARTS, 3), np.nan)
+    if at.any():
+        counts = np.bincount(labels[at], minlength=N_PARTS)
+        seen = counts > 0
+        out[seen] = (_part_sums(labels[at], points[at]) / np.maximum(counts, 1)[:, None])[seen]
     return out
 
 
@@ -386,7 +393,7 @@ def _place_limbs(
     modes: np.ndarray,
     modes_back: np.ndarray,
     boundaries: np.ndarray,
-    cut: np.ndarray,
+    exits: np.ndarray,
     axes: np.ndarray,
     elong: np.ndarray,
     ring: dict[str, tuple[np.ndarray, float]],
@@ -402,24 +409,30 @@ def _place_limbs(
     part's mode) and the direction to its own ring joint, for its bone length.
     Joints without a direction fall back on the prediction.
 
-    A part cut off by the image's edge (``cut``, per limb) shows a stub whose mode
-    lies close to the anchor; from the pushed-back anchor to the pushed-back mode
-    (``modes_back``) the two push-back radii (ring joint and part) differ, and over
-    so short a distance that difference bends the limb (a shank cut at the knee by
-    the lower edge read 20 degrees bent). Such a limb takes the direction to its
-    mode on the visible surface instead, from the centre of its anchor's boundary
-    (``boundaries``: :func:`part_boundaries`' centres) to the surface mode, which
-    lie about equally far in front of the bone. Whole parts keep the pushed-back
-    direction: between arms that occlude each other, a boundary's centre mixes
-    near and far surfaces.
+    A part cut off by the image's edge (``exits``: where each part leaves the
+    image, :func:`image_exits`) shows a stub whose mode lies close to the anchor;
+    from the pushed-back anchor to the pushed-back mode (``modes_back``) the two
+    push-back radii (ring joint and part) differ, and over so short a distance that
+    difference bends the limb (a shank cut below the knee by the lower edge read
+    18-20 degrees bent). Such a limb takes its direction on the visible surface
+    instead, from the centre of its anchor's boundary (``boundaries``:
+    :func:`part_boundaries`' centres), which lies about as far in front of the bone,
+    towards where the part leaves the image where that lies beyond the mode (the
+    longer baseline: the limb runs on out of the image), else towards the mode.
+    Whole parts keep the pushed-back direction: between arms that hide each other a
+    boundary's centre mixes near and far surfaces.
     """
     ia, part, ij = _LIMB_ANCHOR, _LIMB_PART, _LIMB_JOINT
     lengths = bone_lengths[_LIMB_LENGTH]
     anchor = joints[ia]
     live = _rows_finite(anchor) & (counts[part] >= min_part_points)
     to_mode = _units(modes_back[part] - anchor)
+    cut = np.isfinite(exits[part, 0])
     if cut.any():
-        on_surface = _units(modes[part] - boundaries[_LIMB_ANCHOR_PARTS])
+        base = boundaries[_LIMB_ANCHOR_PARTS]
+        along, out = modes[part] - base, exits[part] - base
+        beyond = (out * along).sum(axis=1) >= (along * along).sum(axis=1)  # False for NaN
+        on_surface = _units(np.where(beyond[:, None], out, along))
         surface = cut & _rows_finite(on_surface)
         to_mode[surface] = on_surface[surface]
     # The part's axis, turned towards its mode, where the part is elongated enough.
@@ -543,7 +556,7 @@ def fit_skeleton(
     smoothing: float = 0.0,
     shoulder_anchor: float = 0.3,
     shoulder_offset: np.ndarray | None = None,
-    cut_parts: np.ndarray | None = None,
+    exits: np.ndarray | None = None,
 ) -> SkeletonFit:
     """Fit the 15-joint skeleton to labelled points with calibrated bone lengths.
 
@@ -587,10 +600,10 @@ def fit_skeleton(
         Where the trunk puts the shoulders: ``(across, below)`` the neck in metres
         (:func:`shoulder_offset_of` a calibration skeleton); the T-pose's geometry
         where not given.
-    cut_parts : (15,) bool, optional
-        Parts cut off by the image's edge (:func:`parts_at_image_edge`): a limb
-        whose part is cut follows the direction to its mode on the visible surface
-        (see ``_place_limbs``). None: no part is cut.
+    exits : (15, 3) float, optional
+        Where each part leaves the image (:func:`image_exits`; NaN for parts inside
+        it): a limb whose part is cut off by the image's edge takes its direction on
+        the visible surface (see ``_place_limbs``). None: no part is cut.
 
     Returns
     -------
@@ -649,7 +662,7 @@ def fit_skeleton(
         modes=modes,
         modes_back=modes_back,
         boundaries=centres,
-        cut=np.zeros(len(_LIMBS), bool) if cut_parts is None else cut_parts[_LIMB_PART],
+        exits=np.full((N_PARTS, 3), np.nan) if exits is None else np.asarray(exits, dtype=float),
         axes=axes,
         elong=elong,
         ring=ring,

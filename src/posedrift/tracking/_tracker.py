@@ -32,7 +32,7 @@ from posedrift.skeleton._fit import (
     SkeletonFit,
     bone_anchors,
     fit_skeleton,
-    parts_at_image_edge,
+    image_exits,
     refine_with_votes,
 )
 from posedrift.skeleton._meanshift import part_modes
@@ -781,7 +781,7 @@ class PoseTracker:
             height=cal.height,
             smoothing=self.temporal_smoothing,
             shoulder_offset=cal.shoulders,
-            cut_parts=self._parts_at_edge(points, labels),
+            exits=self._image_exits(points, labels),
             **unanchored,
         )
         health = assess(
@@ -807,11 +807,11 @@ class PoseTracker:
         trunk, arm = self.vote_weights
         return refine_with_votes(joints, voted, trunk_weight=trunk, arm_weight=arm)
 
-    def _parts_at_edge(self, points: np.ndarray, labels: np.ndarray) -> np.ndarray:
-        """``(15,)`` whether each part's points reach the image's edge (it is cut off)."""
+    def _image_exits(self, points: np.ndarray, labels: np.ndarray) -> np.ndarray:
+        """``(15, 3)`` where each part leaves the image (NaN inside it): :func:`image_exits`."""
         step = self.decimation or working_decimation(self.intrinsics)
         # One working pixel (``step`` of the camera's) and a voxel from the border.
-        return parts_at_image_edge(
+        return image_exits(
             points, labels, self.intrinsics, margin=step, voxel_size=self._voxel or 0.0
         )
 
