@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from posedrift.camera import DepthFrame, camera_preset
-from posedrift.skeleton import ANGLE_NAMES, JOINT_NAMES, JOINT_PARENTS, joint_angles
+from posedrift.skeleton import ANGLE_NAMES, JOINT_INDEX, JOINT_NAMES, JOINT_PARENTS, joint_angles
 from posedrift.tracking import FrameResult, FrameStatus, PoseTracker
 
 K = camera_preset("kinect1-qvga")
@@ -169,7 +169,7 @@ def test_calibration_measures_where_the_shoulders_sit(sequence):
 
 
 def test_implausible_shoulders_fall_back_on_the_t_pose():
-    from posedrift.skeleton import JOINT_INDEX, t_pose_joints
+    from posedrift.skeleton import t_pose_joints
     from posedrift.tracking._init import measure_shoulders
 
     joints = t_pose_joints(1.75) + [0.0, 0.0, 2.5]
@@ -429,8 +429,17 @@ def test_a_person_too_near_the_camera_is_measured_and_tracked():
     statuses = [r.status for r in results]
     assert statuses.count(FrameStatus.TRACKED) == len(results) - 1
     errors = np.abs(joint_angles(np.array([r.joints for r in results])) - near.reference.angles)
-    seen = [i for i, name in enumerate(ANGLE_NAMES) if not name.endswith("knee")]
-    assert np.nanmean(errors[:, seen]) < 8.0  # degrees (the knees' ankles are out of view)
+    knees = [i for i, name in enumerate(ANGLE_NAMES) if name.endswith("knee")]
+    seen = [i for i in range(len(ANGLE_NAMES)) if i not in knees]
+    assert np.nanmean(errors[:, seen]) < 8.0  # degrees
+    # The ankles are out of view: the shanks aim where they leave the image (about 15
+    # degrees from the straight knees; 25 from the stubs' modes).
+    assert np.nanmean(errors[:, knees]) < 18.0
+    # The feet below the image are inferred, not seen, and say so.
+    feet = [JOINT_INDEX["right_foot"], JOINT_INDEX["left_foot"]]
+    confidence = np.array([r.confidence for r in results])
+    assert (confidence[:, feet] <= 0.3).all()
+    assert (confidence[:, JOINT_INDEX["torso"]] > 0.3).all()
 
 
 def test_joints_in_view_are_those_projecting_inside_the_image():

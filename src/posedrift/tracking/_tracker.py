@@ -51,6 +51,7 @@ from posedrift.tracking._result import FrameResult, FrameStatus
 
 N_PARTS = 15
 _TRACK_FLOOR = 0.02  # floor of the tracked posterior in the fusion with appearance
+_UNSEEN_CONFIDENCE = 0.3  # a joint outside the image, as fit_skeleton's joints from the prediction
 # Depth band (metres in front of / behind the last frame's median point depth) searched
 # for the person first: limbs reach about a metre towards the camera, and walls and
 # clutter outside the band never reach the floor fit and the component search.
@@ -784,6 +785,7 @@ class PoseTracker:
             exits=self._image_exits(points, labels),
             **unanchored,
         )
+        in_view = self._in_view(fit.joints)
         health = assess(
             points,
             labels,
@@ -791,8 +793,16 @@ class PoseTracker:
             fit.measured,
             height=cal.height,
             sigma=sigma,
-            in_view=self._in_view(fit.joints),
+            in_view=in_view,
         )
+        # A joint outside the image is inferred, never seen: at most the confidence of
+        # one filled in from the prediction.
+        outside = ~in_view & np.isfinite(fit.joints).all(axis=1)
+        if outside.any():
+            capped = np.where(
+                outside, np.minimum(fit.confidence, _UNSEEN_CONFIDENCE), fit.confidence
+            )
+            fit = replace(fit, confidence=capped)
         return _Attempt(labels=labels, fit=fit, health=health)
 
     def _refine_with_votes(self, joints: np.ndarray) -> np.ndarray:
