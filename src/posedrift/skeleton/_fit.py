@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from posedrift.camera import Intrinsics, project
+from posedrift.camera import Intrinsics
 from posedrift.skeleton._definitions import (
     JOINT_INDEX,
     JOINT_PARENTS,
@@ -255,14 +255,17 @@ def image_exits(
     """
     points = np.asarray(points, dtype=float)
     labels = np.asarray(labels)
-    uv = project(points, intrinsics)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        margin = margin + voxel_size * intrinsics.fx / points[:, 2]
-    u, v = uv[:, 0], uv[:, 1]
-    at = (u < margin) | (u > intrinsics.width - 1 - margin)
-    at |= (v < margin) | (v > intrinsics.height - 1 - margin)
-    at &= (labels >= 0) & (labels < N_PARTS)
+    k = intrinsics
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):  # project()'s arithmetic, inline
+        u = k.fx * x / z + k.cx
+        v = k.fy * y / z + k.cy
+        margin = margin + voxel_size * k.fx / z
+    at = (u < margin) | (u > k.width - 1 - margin) | (v < margin) | (v > k.height - 1 - margin)
     out = np.full((N_PARTS, 3), np.nan)
+    if not at.any():
+        return out
+    at &= (labels >= 0) & (labels < N_PARTS)
     if at.any():
         counts = np.bincount(labels[at], minlength=N_PARTS)
         seen = counts > 0
