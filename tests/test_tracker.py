@@ -452,3 +452,49 @@ def test_joints_in_view_are_those_projecting_inside_the_image():
     expected = np.ones(15, bool)
     expected[1:5] = False
     np.testing.assert_array_equal(tracker._in_view(joints), expected)
+
+
+def _turn(points: np.ndarray, degrees: float, shift) -> np.ndarray:
+    a = np.radians(degrees)
+    rot = np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
+    return points @ rot.T + np.asarray(shift)
+
+
+def test_carried_joints_follow_the_field_near_the_points_and_the_body_away():
+    from posedrift.tracking._tracker import _carry_joints
+
+    # A body-sized surface of template points (3 cm apart) 2.8 m away, turned 5
+    # degrees and moved 2 cm.
+    x, y = np.meshgrid(np.linspace(-0.18, 0.18, 13), np.linspace(-0.9, 0.9, 61))
+    source = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.8)])
+    moved = _turn(source, 5.0, [0.02, 0.0, 0.01])
+    joints = np.vstack(
+        [
+            source[[0, 400, 792]],  # on template points
+            [[0.0, 0.0, 2.8 + 0.055]],  # 5.5 cm behind the surface: halfway
+            [[0.0, 0.0, 2.8 + 0.2]],  # 20 cm behind it
+            [[0.6, 1.2, 2.8]],  # far outside
+        ]
+    )
+    gap = np.sqrt(((joints[:, None] - source[None]) ** 2).sum(axis=2).min(axis=1))
+    np.testing.assert_allclose(gap[:4], [0.0, 0.0, 0.0, 0.055], atol=1e-12)
+    assert gap[4:].min() > 0.15
+    rigid = _turn(joints, 5.0, [0.02, 0.0, 0.01])
+
+    # Identity: nothing moved.
+    np.testing.assert_allclose(
+        _carry_joints(joints, source, source, lambda p: p), joints, atol=1e-12
+    )
+    # A rigid field is followed everywhere, to the nanometre.
+    field = lambda p: _turn(p, 5.0, [0.02, 0.0, 0.01])  # noqa: E731
+    np.testing.assert_allclose(_carry_joints(joints, source, moved, field), rigid, atol=1e-9)
+    # A field that overshoots away from the points (10 cm everywhere, here): followed
+    # on the points, ignored far from them, half-followed in between.
+    overshoot = lambda p: field(p) + [0.1, 0.0, 0.0]  # noqa: E731
+    carried = _carry_joints(joints, source, moved, overshoot)
+    np.testing.assert_allclose(carried[:3], rigid[:3] + [0.1, 0.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(carried[4:], rigid[4:], atol=1e-9)
+    np.testing.assert_allclose(carried[3], rigid[3] + [0.05, 0.0, 0.0], atol=1e-9)
+    # Where the field gives nothing, the rigid motion.
+    nan_field = lambda p: np.full_like(p, np.nan)  # noqa: E731
+    np.testing.assert_allclose(_carry_joints(joints, source, moved, nan_field), rigid, atol=1e-9)

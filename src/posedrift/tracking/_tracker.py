@@ -52,6 +52,9 @@ from posedrift.tracking._result import FrameResult, FrameStatus
 N_PARTS = 15
 _TRACK_FLOOR = 0.02  # floor of the tracked posterior in the fusion with appearance
 _UNSEEN_CONFIDENCE = 0.3  # a joint outside the image, as fit_skeleton's joints from the prediction
+# How far from the template's nearest point (metres) a joint follows the registration's
+# nonrigid field, and from where on the body's rigid motion alone (_carry_joints).
+_FIELD_TRUSTED, _FIELD_IGNORED = 0.03, 0.08
 # Depth band (metres in front of / behind the last frame's median point depth) searched
 # for the person first: limbs reach about a metre towards the camera, and walls and
 # clutter outside the band never reach the floor fit and the component search.
@@ -81,6 +84,15 @@ class _Attempt:
     registration: Any = None
 
 
+def _rigid_fit(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rotation and translation that best map points ``a`` onto ``b`` (Kabsch)."""
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
+    s = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
+    rot = vt.T @ s @ u.T
+    return rot, cb - rot @ ca
+
+
 def _icp(source: np.ndarray, target: np.ndarray, iterations: int = 10):
     """Rigid ICP of ``source`` onto ``target``: (rotation, translation, nn index per target)."""
     from scipy.spatial import cKDTree
@@ -91,15 +103,33 @@ def _icp(source: np.ndarray, target: np.ndarray, iterations: int = 10):
     for _ in range(iterations):
         d, idx = tree_t.query(moved)
         keep = d <= max(np.percentile(d, 90), 1e-9)
-        a, b = source[keep], target[idx[keep]]
-        ca, cb = a.mean(axis=0), b.mean(axis=0)
-        u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
-        s = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
-        rot = vt.T @ s @ u.T
-        trans = cb - rot @ ca
+        rot, trans = _rigid_fit(source[keep], target[idx[keep]])
         moved = source @ rot.T + trans
     _, nn = cKDTree(moved).query(target)
     return rot, trans, nn
+
+
+def _carry_joints(joints: np.ndarray, source: np.ndarray, moved: np.ndarray, field) -> np.ndarray:
+    """The previous frame's joints moved by a nonrigid registration of its points.
+
+    ``field`` (the registration's ``apply``) is fitted on the template points
+    ``source`` (which it takes to ``moved``) and extrapolates away from them: on a
+    development clip its displacement of the joints grew with their distance from
+    the nearest template point (median 2 cm within 3 cm, 6 cm beyond 15 cm, where
+    the template's points near them moved 1.5-2 cm). Joints lie inside the body,
+    and hidden or out-of-view ones far from any point: each joint follows
+    the field within :data:`_FIELD_TRUSTED` of the template, the body's rigid
+    motion (``source`` onto ``moved``) beyond :data:`_FIELD_IGNORED`, and a
+    linear blend of the two between.
+    """
+    joints = np.asarray(joints, dtype=float)
+    rot, trans = _rigid_fit(source, moved)
+    rigid = joints @ rot.T + trans
+    warped = field(joints)
+    gap = np.sqrt(((joints[:, None, :] - source[None, :, :]) ** 2).sum(axis=2).min(axis=1))
+    trust = np.clip((_FIELD_IGNORED - gap) / (_FIELD_IGNORED - _FIELD_TRUSTED), 0.0, 1.0)
+    blended = trust[:, None] * warped + (1.0 - trust[:, None]) * rigid
+    return np.where(np.isfinite(warped), blended, rigid)
 
 
 def _units_hint(depth: np.ndarray) -> str:
@@ -200,7 +230,8 @@ class PoseTracker:
         confident forest may overrule the track).
     temporal_smoothing : float
         In [0, 1): weight of the predicted joints in each fitted joint (when
-        tracking, the previous skeleton moved by the registration's warp, so
+        tracking, the previous skeleton moved by the registration's warp near the
+        points and by the body's rigid motion away from them, so
         motion-compensated; when re-initializing, the last pose moved with the
         body). Steadies the joints against label noise; 0 fits every frame afresh.
     vote_weights : (float, float)
@@ -659,7 +690,10 @@ class PoseTracker:
                     accelerate=True,
                 )
         post = res.transfer_labels(labels.astype(np.int64), N_PARTS)
-        return post, res.apply, res, float(np.sqrt(max(res.sigma2, 0.0)))
+        warp = res.apply
+        if self.registration == "nonrigid":
+            warp = lambda joints: _carry_joints(joints, source, res.moved, res.apply)  # noqa: E731
+        return post, warp, res, float(np.sqrt(max(res.sigma2, 0.0)))
 
     def _seed_result(self, source: np.ndarray):
         """A nonrigid result to carry the starting sigma^2 (the API's warm start)."""
