@@ -20,6 +20,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from scipy.spatial.distance import cdist
 
 from posedrift._validation import check_rng, check_scalar
 from posedrift.camera import DepthFrame, Intrinsics, backproject, project
@@ -126,7 +127,7 @@ def _carry_joints(joints: np.ndarray, source: np.ndarray, moved: np.ndarray, fie
     rot, trans = _rigid_fit(source, moved)
     rigid = joints @ rot.T + trans
     warped = field(joints)
-    gap = np.sqrt(((joints[:, None, :] - source[None, :, :]) ** 2).sum(axis=2).min(axis=1))
+    gap = np.sqrt(cdist(joints, source, "sqeuclidean").min(axis=1))
     trust = np.clip((_FIELD_IGNORED - gap) / (_FIELD_IGNORED - _FIELD_TRUSTED), 0.0, 1.0)
     blended = trust[:, None] * warped + (1.0 - trust[:, None]) * rigid
     return np.where(np.isfinite(warped), blended, rigid)
