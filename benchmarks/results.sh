@@ -79,6 +79,9 @@ utd_repeat utd2 "$(for a in $(seq 1 27); do for s in 1 2 3 4; do printf "a%d_s%d
 # How much of the error the labels cause: the tracker, with a perfect forest, true labels.
 python "$here/benchmarks/label_oracle.py" builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" \
     "$M/cmu/002_10.bvh" "$M/cmu/001_08.bvh" --frames 500 | tee "$out/label_oracle.md"
+# How the previous skeleton is carried into the next frame, against the true joint motion.
+python "$here/benchmarks/carried_joints_figure.py" "$M/cmu/002_07.bvh" "$out/carried_joints.png" \
+    --frames 300 | tee "$out/carried_joints.md"
 # Real Kinect recordings: one sequence per action, subject (a mod 4) + 1, trial 1.
 seqs=$(for a in $(seq 1 27); do printf "a%d_s%d_t1," "$a" $(( a % 4 + 1 )); done)
 posedrift -q eval utd "$data/utd-mhad" --sequences "${seqs%,}" --methods "$methods" \
