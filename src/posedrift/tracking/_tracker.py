@@ -115,10 +115,10 @@ def _carry_joints(joints: np.ndarray, source: np.ndarray, moved: np.ndarray, fie
 
     ``field`` (the registration's ``apply``) is fitted on the template points
     ``source`` (which it takes to ``moved``) and extrapolates away from them: on a
-    development clip its displacement of the joints grew with their distance from
-    the nearest template point (median 2 cm within 3 cm, 6 cm beyond 15 cm, where
-    the template's points near them moved 1.5-2 cm). Joints lie inside the body,
-    and hidden or out-of-view ones far from any point: each joint follows
+    development clip its predicted motion of the joints was 1.3 cm off their true
+    motion within 3 cm of the nearest template point and 6.4 cm off beyond 15 cm
+    (``benchmarks/carried_joints_figure.py``). Joints lie inside the body, and
+    hidden or out-of-view ones far from any point: each joint follows
     the field within :data:`_FIELD_TRUSTED` of the template, the body's rigid
     motion (``source`` onto ``moved``) beyond :data:`_FIELD_IGNORED`, and a
     linear blend of the two between.
