@@ -71,19 +71,19 @@ class TrueLabelForest:
         return self._probabilities(self.truth[pixels[:, 0], pixels[:, 1]].astype(np.int64) - 1)
 
 
-def tracked_angles(sequence, tracker: PoseTracker, forest: TrueLabelForest | None = None):
-    """``(T, 8)`` angles of the tracker's joints, frame by frame (``forest`` fed the truth)."""
+def tracked_joints(sequence, tracker: PoseTracker, forest: TrueLabelForest | None = None):
+    """``(T, 15, 3)`` joints of the tracker, frame by frame (``forest`` fed the truth)."""
     joints = []
     for t, frame in enumerate(sequence.frames):
         if forest is not None:
             forest.truth = sequence.reference.labels[t]
         joints.append(tracker.process(frame).joints)
-    return joint_angles(np.stack(joints))
+    return np.stack(joints)
 
 
-def true_label_angles(sequence, calibration, n_points: int = 400) -> np.ndarray:
-    """``(T, 8)`` angles of the skeleton fitted to each frame's true labels."""
-    out = np.full((len(sequence.frames), 8), np.nan)
+def true_label_joints(sequence, calibration, n_points: int = 400) -> np.ndarray:
+    """``(T, 15, 3)`` joints of the skeleton fitted to each frame's true labels."""
+    out = np.full((len(sequence.frames), 15, 3), np.nan)
     for t, frame in enumerate(sequence.frames):
         truth = sequence.reference.labels[t]
         mask = (truth > 0) & (frame.depth > 0)
@@ -104,7 +104,7 @@ def true_label_angles(sequence, calibration, n_points: int = 400) -> np.ndarray:
             shoulder_offset=calibration.shoulders,
             exits=image_exits(points, labels, frame.intrinsics, voxel_size=voxel),
         )
-        out[t] = joint_angles(fit.joints)
+        out[t] = fit.joints
     return out
 
 
@@ -119,6 +119,22 @@ def summary(errors: np.ndarray, yaw: np.ndarray) -> dict[str, float]:
     return row
 
 
+def facing_by_view(joints: np.ndarray, yaw: np.ndarray) -> str:
+    """Median facing yaw of ``joints`` (and of the truth, ``yaw``) per view, degrees.
+
+    Where the labels turn the skeleton less than the person, the track lags a turn.
+    """
+    estimated = facing_yaw(joints)
+    cells = []
+    for low, high in VIEWS.values():
+        inside = (yaw >= low) & (yaw < high) & np.isfinite(estimated)
+        if inside.any():
+            cells.append(f"{np.median(estimated[inside]):.0f} ({np.median(yaw[inside]):.0f})")
+        else:
+            cells.append("-")
+    return " / ".join(cells)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("clips", nargs="+", help="BVH files, or 'builtin'")
@@ -128,8 +144,12 @@ def main() -> None:
     args = parser.parse_args()
     shape = {"girth": args.girth} if args.girth != 1.0 else None
     columns = ["mean", "first 100", "last 100", "last/first", *VIEWS]
-    print("| clip | labels | " + " | ".join(columns) + " | angles scored |")
-    print("|---|---|" + "---:|" * (len(columns) + 1))
+    views = " / ".join(VIEWS)
+    print(
+        "| clip | labels | " + " | ".join(columns) + " | angles scored "
+        f"| facing yaw, {views} (truth) |"
+    )
+    print("|---|---|" + "---:|" * (len(columns) + 2))
     for clip in args.clips:
         motion = procedural_motion(fps=30.0) if clip == "builtin" else bvh_motion(clip)
         sequence = build_sequence(
@@ -142,11 +162,11 @@ def main() -> None:
             name=clip,
         )
         tracker = PoseTracker(sequence.frames[0].intrinsics)
-        tracked = tracked_angles(sequence, tracker)
-        oracle = true_label_angles(sequence, tracker.calibration)
+        tracked = tracked_joints(sequence, tracker)
+        oracle = true_label_joints(sequence, tracker.calibration)
         perfect = TrueLabelForest()
         # decimation=1: the true label image is at the frame's own resolution.
-        with_truth = tracked_angles(
+        with_truth = tracked_joints(
             sequence,
             PoseTracker(sequence.frames[0].intrinsics, forest=perfect, decimation=1),
             perfect,
@@ -154,14 +174,19 @@ def main() -> None:
         yaw = facing_yaw(sequence.reference.joints)
         name = clip.rsplit("/", 1)[-1]
         rows = (("tracker", tracked), ("tracker, perfect forest", with_truth), ("true", oracle))
-        for kind, angles in rows:
+        for kind, joints in rows:
+            angles = joint_angles(joints)
             errors = np.nanmean(np.abs(angles - sequence.reference.angles), axis=1)
             row = summary(errors, yaw)
             cells = " | ".join(f"{row[c]:.2f}" for c in columns)
             # Angles whose joints the labels could not place are left out of the means
             # (NaN), which flatters a skeleton stage that gives up on hard frames.
             scored = np.mean(np.isfinite(angles))
-            print(f"| {name} | {kind} | {cells} | {100 * scored:.0f}% |", flush=True)
+            print(
+                f"| {name} | {kind} | {cells} | {100 * scored:.0f}% "
+                f"| {facing_by_view(joints, yaw)} |",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from posedrift.skeleton import facing_yaw, joint_angles, t_pose_joints
 from posedrift.synthetic import build_sequence, procedural_motion
 from posedrift.tracking import PoseTracker
 
@@ -40,9 +41,32 @@ def test_true_label_forest_answers_each_pixel_with_its_true_part(sequence):
 def test_both_controls_recover_the_angles_within_a_few_degrees(sequence):
     forest = label_oracle.TrueLabelForest()
     tracker = PoseTracker(sequence.frames[0].intrinsics, forest=forest, decimation=1)
-    tracked = label_oracle.tracked_angles(sequence, tracker, forest)
+    tracked = joint_angles(label_oracle.tracked_joints(sequence, tracker, forest))
     assert np.isfinite(tracked).all()
     assert _error(tracked, sequence) < 4.0  # degrees
-    true = label_oracle.true_label_angles(sequence, tracker.calibration)
+    true = joint_angles(label_oracle.true_label_joints(sequence, tracker.calibration))
     assert np.mean(np.isfinite(true)) > 0.95
     assert _error(true, sequence) < 4.0
+
+
+def _turned(degrees: float) -> np.ndarray:
+    """A T-pose 3 m in front of the camera, turned ``degrees`` about the vertical."""
+    a = np.radians(degrees)
+    turn = np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
+    world = t_pose_joints(1.75) @ turn.T  # +Y up, facing +Z before the turn
+    return world * [1.0, -1.0, -1.0] + [0.0, 0.0, 3.0]
+
+
+def test_facing_by_view_gives_the_median_yaw_of_each_view_beside_the_truth():
+    truth = np.stack([_turned(d) for d in (10, 20, 30, 100, 170)])
+    yaw = facing_yaw(truth)
+    np.testing.assert_allclose(yaw, [10, 20, 30, 100, 170], atol=1e-6)
+    assert label_oracle.facing_by_view(truth, yaw) == "20 (20) / 100 (100) / 170 (170)"
+    # A track that lags the turn: the same frames, each turned half as far.
+    lagging = np.stack([_turned(d / 2) for d in (10, 20, 30, 100, 170)])
+    assert label_oracle.facing_by_view(lagging, yaw) == "10 (20) / 50 (100) / 85 (170)"
+    # Views with no frame, or joints that could not be placed, leave a dash.
+    assert label_oracle.facing_by_view(truth[:3], yaw[:3]) == "20 (20) / - / -"
+    unplaced = truth.copy()
+    unplaced[3:] = np.nan
+    assert label_oracle.facing_by_view(unplaced, yaw) == "20 (20) / - / -"
