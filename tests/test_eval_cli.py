@@ -106,9 +106,56 @@ def test_harness_metrics_failures_and_label_accuracy():
     assert row["filled"]["mpjpe_mm"] == pytest.approx(50.0)
     assert row["frames_per_second"] > 0
     assert report["methods"]["centroid"]["failed_frames"] == 0
-    # The toy person faces the camera in every frame.
-    assert row["by_view"]["front"] == {"frames": 6, "angle_error_mean_deg": 0.0}
-    assert row["by_view"]["back"] == {"frames": 0, "angle_error_mean_deg": None}
+    # The toy person faces the camera in every frame. The skeleton 5 cm to the side of
+    # the truth, 3 m away, sees the camera 0.95 degrees off its facing direction.
+    front = row["by_view"]["front"]
+    assert front["frames"] == 6 and front["angle_error_mean_deg"] == 0.0
+    assert front["reference_facing_yaw_median_deg"] == pytest.approx(0.0, abs=1e-9)
+    assert front["facing_yaw_median_deg"] == pytest.approx(
+        np.degrees(np.arctan2(0.05, 3.0)), abs=1e-3
+    )
+    assert row["by_view"]["back"] == {
+        "frames": 0,
+        "angle_error_mean_deg": None,
+        "facing_yaw_median_deg": None,
+        "reference_facing_yaw_median_deg": None,
+    }
+
+
+class Still:
+    """Test-only: the same skeleton (given at construction) in every frame."""
+
+    name = "still"
+
+    def __init__(self, joints):
+        self.joints = joints
+
+    def process(self, frame):
+        return FrameResult(frame.index, FrameStatus.TRACKED, self.joints, np.ones(15))
+
+
+def test_by_view_tells_a_skeleton_that_faces_the_camera_from_a_person_turned_away():
+    seq = _toy_sequence()
+    front = seq.reference.joints[0]
+    pelvis = front[[9, 10]].mean(axis=0)
+    back = (front - pelvis) * [-1, 1, -1] + pelvis  # turned 180 degrees about the vertical
+    turned = np.repeat(back[None], len(seq.frames), axis=0)
+    ref = Reference(joints=turned, angles=joint_angles(turned), labels=seq.reference.labels)
+    seq = EvaluationSequence(name="turned", frames=seq.frames, reference=ref)
+    report = evaluate(
+        [seq],
+        {"still": lambda k, forest=None: Still(front), "true": lambda k, forest=None: Still(back)},
+        progress=False,
+        forest=object(),
+    )
+    lagging = report["methods"]["still"]["by_view"]
+    assert lagging["front"]["frames"] == 0 and lagging["front"]["facing_yaw_median_deg"] is None
+    assert lagging["back"]["frames"] == 6
+    assert lagging["back"]["reference_facing_yaw_median_deg"] == pytest.approx(180.0, abs=1e-6)
+    assert lagging["back"]["facing_yaw_median_deg"] == pytest.approx(0.0, abs=1e-6)
+    following = report["methods"]["true"]["by_view"]["back"]
+    assert following["facing_yaw_median_deg"] == pytest.approx(180.0, abs=1e-6)
+    assert following["angle_error_mean_deg"] == pytest.approx(0.0, abs=1e-9)
 
 
 def test_parse_methods():

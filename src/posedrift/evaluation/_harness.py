@@ -488,13 +488,29 @@ VIEWS: dict[str, tuple[float, float]] = {
 per-view errors: facing the camera, side on, back to the camera."""
 
 
-def _by_view(angles: np.ndarray, ref_angles: np.ndarray, yaw: np.ndarray) -> dict:
-    """Mean angle error and frame count per view (``VIEWS``)."""
+def _by_view(joints: np.ndarray, reference: np.ndarray, ref_angles: np.ndarray) -> dict:
+    """Per view (``VIEWS``): frames, mean angle error and the median facing yaw.
+
+    The facing yaws, the method's skeleton's beside the reference's over the frames
+    where both are known, say whether a method follows a person who turns: a skeleton
+    that still faces the camera when the person's back is to it reads about 0
+    against 180.
+    """
+    yaw, est_yaw = facing_yaw(reference), facing_yaw(joints)
+    angles = joint_angles(joints)
     out = {}
     for view, (low, high) in VIEWS.items():
         sel = (yaw >= low) & (yaw < high)
         mean = angle_errors(angles[sel], ref_angles[sel])["mean"] if sel.any() else None
-        out[view] = {"frames": int(sel.sum()), "angle_error_mean_deg": _round(mean)}
+        both = sel & np.isfinite(est_yaw)
+        out[view] = {
+            "frames": int(sel.sum()),
+            "angle_error_mean_deg": _round(mean),
+            "facing_yaw_median_deg": _round(np.median(est_yaw[both])) if both.any() else None,
+            "reference_facing_yaw_median_deg": (
+                _round(np.median(yaw[both])) if both.any() else None
+            ),
+        }
     return out
 
 
@@ -525,7 +541,8 @@ def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
     (exceptions a method raised, counted as failed frames) and ``"status_counts"``
     (frames per :class:`~posedrift.tracking.FrameStatus`), ``"by_view"`` (the mean
     angle error over the frames where the reference faces the camera, is side on,
-    or has its back to it: :data:`VIEWS`); per sequence of at least 200 frames,
+    or has its back to it: :data:`VIEWS`; with the median facing yaw of the method's
+    skeleton and of the reference there); per sequence of at least 200 frames,
     ``"first_100_deg"`` and ``"last_100_deg"`` (drift).
     """
     out: dict[str, Any] = {
@@ -543,7 +560,6 @@ def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
         filled = np.concatenate([fill_forward(j) for j in converted])
         ref = np.concatenate([s.reference.joints for s in run.sequences])
         ref_angles = np.concatenate([s.reference.angles for s in run.sequences])
-        ref_yaw = facing_yaw(ref)
         hits = sum(r.label_hits for r in per)
         counted = sum(r.label_total for r in per)
         seconds = sum(r.seconds for r in per)
@@ -568,7 +584,7 @@ def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
             },
             "method_errors": sum(len(r.errors) for r in per),
             "status_counts": _status_counts(per),
-            "by_view": _by_view(joint_angles(est), ref_angles, ref_yaw),
+            "by_view": _by_view(est, ref, ref_angles),
         }
         if convention != "native":
             raw = np.concatenate(native)
