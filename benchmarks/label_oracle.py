@@ -30,7 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from posedrift.camera import backproject
-from posedrift.evaluation import VIEWS
+from posedrift.evaluation import VIEWS, facing_by_view
 from posedrift.labelling import PartPrediction
 from posedrift.labelling._relabel import geodesic_graph
 from posedrift.points import downsample
@@ -119,19 +119,11 @@ def summary(errors: np.ndarray, yaw: np.ndarray) -> dict[str, float]:
     return row
 
 
-def facing_by_view(joints: np.ndarray, yaw: np.ndarray) -> str:
-    """Median facing yaw of ``joints`` (and of the truth, ``yaw``) per view, degrees.
-
-    Where the labels turn the skeleton less than the person, the track lags a turn.
-    """
-    estimated = facing_yaw(joints)
+def facing_cells(joints: np.ndarray, reference: np.ndarray) -> str:
+    """The median facing yaw of ``joints`` per view, the reference's in brackets."""
     cells = []
-    for low, high in VIEWS.values():
-        inside = (yaw >= low) & (yaw < high) & np.isfinite(estimated)
-        if inside.any():
-            cells.append(f"{np.median(estimated[inside]):.0f} ({np.median(yaw[inside]):.0f})")
-        else:
-            cells.append("-")
+    for own, truth in facing_by_view(joints, reference).values():
+        cells.append("-" if own is None else f"{own:.0f} ({truth:.0f})")
     return " / ".join(cells)
 
 
@@ -184,7 +176,7 @@ def main() -> None:
             scored = np.mean(np.isfinite(angles))
             print(
                 f"| {name} | {kind} | {cells} | {100 * scored:.0f}% "
-                f"| {facing_by_view(joints, yaw)} |",
+                f"| {facing_cells(joints, sequence.reference.joints)} |",
                 flush=True,
             )
 

@@ -57,16 +57,15 @@ def _turned(degrees: float) -> np.ndarray:
     return world * [1.0, -1.0, -1.0] + [0.0, 0.0, 3.0]
 
 
-def test_facing_by_view_gives_the_median_yaw_of_each_view_beside_the_truth():
+def test_facing_cells_give_the_median_yaw_of_each_view_beside_the_truth():
     truth = np.stack([_turned(d) for d in (10, 20, 30, 100, 170)])
-    yaw = facing_yaw(truth)
-    np.testing.assert_allclose(yaw, [10, 20, 30, 100, 170], atol=1e-6)
-    assert label_oracle.facing_by_view(truth, yaw) == "20 (20) / 100 (100) / 170 (170)"
+    np.testing.assert_allclose(facing_yaw(truth), [10, 20, 30, 100, 170], atol=1e-6)
+    assert label_oracle.facing_cells(truth, truth) == "20 (20) / 100 (100) / 170 (170)"
     # A track that lags the turn: the same frames, each turned half as far.
     lagging = np.stack([_turned(d / 2) for d in (10, 20, 30, 100, 170)])
-    assert label_oracle.facing_by_view(lagging, yaw) == "10 (20) / 50 (100) / 85 (170)"
+    assert label_oracle.facing_cells(lagging, truth) == "10 (20) / 50 (100) / 85 (170)"
     # Views with no frame, or joints that could not be placed, leave a dash.
-    assert label_oracle.facing_by_view(truth[:3], yaw[:3]) == "20 (20) / - / -"
+    assert label_oracle.facing_cells(truth[:3], truth[:3]) == "20 (20) / - / -"
     unplaced = truth.copy()
     unplaced[3:] = np.nan
-    assert label_oracle.facing_by_view(unplaced, yaw) == "20 (20) / - / -"
+    assert label_oracle.facing_cells(unplaced, truth) == "20 (20) / - / -"

@@ -488,28 +488,60 @@ VIEWS: dict[str, tuple[float, float]] = {
 per-view errors: facing the camera, side on, back to the camera."""
 
 
-def _by_view(joints: np.ndarray, reference: np.ndarray, ref_angles: np.ndarray) -> dict:
-    """Per view (``VIEWS``): frames, mean angle error and the median facing yaw.
+def facing_by_view(joints: np.ndarray, reference: np.ndarray) -> dict[str, tuple]:
+    """Median facing yaw of a skeleton and of the reference, per view (``VIEWS``).
 
-    The facing yaws, the method's skeleton's beside the reference's over the frames
-    where both are known, say whether a method follows a person who turns: a skeleton
-    that still faces the camera when the person's back is to it reads about 0
-    against 180.
+    Says whether a method follows a person who turns: a skeleton that still faces
+    the camera when the person's back is to it reads about 0 against 180.
+
+    Parameters
+    ----------
+    joints, reference : (T, 15, 3) float
+        The method's joints and the reference's, frame by frame (camera frame).
+
+    Returns
+    -------
+    dict
+        ``{view: (joints' median, reference's median)}`` in degrees, over the frames
+        of that view (by the reference's yaw) where the joints' yaw is known;
+        ``(None, None)`` where there is no such frame.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from posedrift.skeleton import t_pose_joints
+    >>> facing = t_pose_joints(1.75) * [1.0, -1.0, -1.0] + [0.0, 0.0, 3.0]  # camera frame
+    >>> away = facing * [-1.0, 1.0, -1.0] + [0.0, 0.0, 6.0]  # turned about the vertical
+    >>> views = facing_by_view(facing[None], away[None])  # a skeleton that did not turn
+    >>> views["back"], views["front"]
+    ((0.0, 180.0), (None, None))
     """
     yaw, est_yaw = facing_yaw(reference), facing_yaw(joints)
+    out = {}
+    for view, (low, high) in VIEWS.items():
+        both = (yaw >= low) & (yaw < high) & np.isfinite(est_yaw)
+        if both.any():
+            out[view] = (float(np.median(est_yaw[both])), float(np.median(yaw[both])))
+        else:
+            out[view] = (None, None)
+    return out
+
+
+def _by_view(joints: np.ndarray, reference: np.ndarray, ref_angles: np.ndarray) -> dict:
+    """Per view (``VIEWS``): frames, mean angle error and the median facing yaws."""
+    yaw = facing_yaw(reference)
     angles = joint_angles(joints)
+    facing = facing_by_view(joints, reference)
     out = {}
     for view, (low, high) in VIEWS.items():
         sel = (yaw >= low) & (yaw < high)
         mean = angle_errors(angles[sel], ref_angles[sel])["mean"] if sel.any() else None
-        both = sel & np.isfinite(est_yaw)
+        own, ref = facing[view]
         out[view] = {
             "frames": int(sel.sum()),
             "angle_error_mean_deg": _round(mean),
-            "facing_yaw_median_deg": _round(np.median(est_yaw[both])) if both.any() else None,
-            "reference_facing_yaw_median_deg": (
-                _round(np.median(yaw[both])) if both.any() else None
-            ),
+            "facing_yaw_median_deg": _round(own),
+            "reference_facing_yaw_median_deg": _round(ref),
         }
     return out
 
@@ -697,6 +729,7 @@ __all__ = [
     "MethodRun",
     "SequenceRecord",
     "evaluate",
+    "facing_by_view",
     "label_hits",
     "make_method",
     "mean_of_repeats",
