@@ -6,6 +6,7 @@ scikit-learn's template.
 
 from __future__ import annotations
 
+import functools
 import numbers
 from typing import Any
 
@@ -94,29 +95,43 @@ def check_scalar(
         With a message such as "The 'kernel_width' parameter of register_nonrigid
         must be a float in (0, inf). Got -1 instead."
     """
-    where = f" of {caller}" if caller else ""
-    kind = "an int" if integer else "a float"
-    lo = "-inf" if low is None else f"{low:g}"
-    hi = "inf" if high is None else f"{high:g}"
-    interval = f"{'[' if include_low else '('}{lo}, {hi}{']' if include_high else ')'}"
-    message = f"The '{name}' parameter{where} must be {kind} in {interval}. Got {value!r} instead."
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValueError(message)
-    if integer and not isinstance(value, numbers.Integral):
-        raise ValueError(message)
-    if not np.isfinite(value) and not (value == np.inf and high is None):
-        raise ValueError(message)
-    if low is not None and (value < low or (value == low and not include_low)):
-        raise ValueError(message)
-    if high is not None and (value > high or (value == high and not include_high)):
-        raise ValueError(message)
+        ok = False
+    elif integer and not isinstance(value, numbers.Integral):
+        ok = False
+    elif not np.isfinite(value) and not (value == np.inf and high is None):
+        ok = False
+    else:
+        ok = not (
+            (low is not None and (value < low or (value == low and not include_low)))
+            or (high is not None and (value > high or (value == high and not include_high)))
+        )
+    if not ok:  # the message only when needed: this check runs in every frame's loop
+        where = f" of {caller}" if caller else ""
+        kind = "an int" if integer else "a float"
+        lo = "-inf" if low is None else f"{low:g}"
+        hi = "inf" if high is None else f"{high:g}"
+        interval = f"{'[' if include_low else '('}{lo}, {hi}{']' if include_high else ')'}"
+        raise ValueError(
+            f"The '{name}' parameter{where} must be {kind} in {interval}. Got {value!r} instead."
+        )
     return int(value) if integer else float(value)
+
+
+@functools.lru_cache(maxsize=64)
+def _seed_sequence(seed: int) -> np.random.SeedSequence:
+    return np.random.SeedSequence(seed)
 
 
 def check_rng(rng: int | np.random.Generator | None) -> np.random.Generator:
     """Return a Generator from a seed, a Generator, or None."""
     if isinstance(rng, np.random.Generator):
         return rng
+    if isinstance(rng, numbers.Integral) and not isinstance(rng, bool):
+        # default_rng(seed) is Generator(PCG64(SeedSequence(seed))): the seed's
+        # SeedSequence is kept, the same stream at a third of the cost (the tracker
+        # seeds generators every frame).
+        return np.random.Generator(np.random.PCG64(_seed_sequence(int(rng))))
     if rng is None or isinstance(rng, numbers.Integral):
         return np.random.default_rng(rng)
     raise ValueError(
