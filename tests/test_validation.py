@@ -12,7 +12,9 @@ def test_an_int_seed_gives_numpys_stream_for_that_seed_every_time(seed):
         got = check_rng(seed)
         want = np.random.default_rng(seed)
         assert np.array_equal(got.random(100), want.random(100))
-        assert np.array_equal(got.choice(700, 400, replace=False), want.choice(700, 400, replace=False))
+        assert np.array_equal(
+            got.choice(700, 400, replace=False), want.choice(700, 400, replace=False)
+        )
 
 
 def test_a_generator_is_used_as_given_and_bad_seeds_are_refused():
