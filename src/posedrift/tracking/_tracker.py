@@ -115,8 +115,9 @@ def _carry_joints(joints: np.ndarray, source: np.ndarray, moved: np.ndarray, fie
 
     ``field`` (the registration's ``apply``) is fitted on the template points
     ``source`` (which it takes to ``moved``) and extrapolates away from them: on a
-    development clip its predicted motion of the joints was 1.3 cm off their true
-    motion within 3 cm of the nearest template point and 6.4 cm off beyond 15 cm
+    development clip its predicted motion of the joints was 1.0 cm off their true
+    motion within 3 cm of the nearest template point and 1.8 cm off beyond 15 cm
+    with 24 landmarks (6.4 cm with 60), where this blend is 0.9 cm off
     (``benchmarks/carried_joints_figure.py``). Joints lie inside the body, and
     hidden or out-of-view ones far from any point: each joint follows
     the field within :data:`_FIELD_TRUSTED` of the template, the body's rigid
