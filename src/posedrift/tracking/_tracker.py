@@ -205,7 +205,8 @@ class PoseTracker:
         default). The angle error does not depend on it between 16 landmarks and
         the exact kernel (None), within the run-to-run spread, on synthetic clips
         and on real recordings, while the registration's cost grows with it:
-        about 3.5 ms a frame at 24, 5.5 at 60 and 25 exact (docs/RESULTS.md).
+        about 3.3 ms a frame at 24 landmarks, 5.7 at 60 and 25 with the exact
+        kernel, on one AVX2 core (docs/RESULTS.md, "Fewer landmarks").
     alpha : float
         Steepness (1/m) of Algorithm 2's sigmoid.
     height : float, optional
