@@ -8,7 +8,7 @@ from posedrift._validation import check_rng, check_scalar
 
 @pytest.mark.parametrize("seed", [0, 1, 12345, 2**40, np.int64(7), True])
 def test_an_int_seed_gives_numpys_stream_for_that_seed_every_time(seed):
-    for _ in range(2):  # the cached seed must not carry state from one call to the next
+    for _ in range(2):  # each call starts the stream afresh
         got = check_rng(seed)
         want = np.random.default_rng(seed)
         assert np.array_equal(got.random(100), want.random(100))

@@ -6,7 +6,6 @@ scikit-learn's template.
 
 from __future__ import annotations
 
-import functools
 import numbers
 from typing import Any
 
@@ -118,20 +117,10 @@ def check_scalar(
     return int(value) if integer else float(value)
 
 
-@functools.lru_cache(maxsize=64)
-def _seed_sequence(seed: int) -> np.random.SeedSequence:
-    return np.random.SeedSequence(seed)
-
-
 def check_rng(rng: int | np.random.Generator | None) -> np.random.Generator:
     """Return a Generator from a seed, a Generator, or None."""
     if isinstance(rng, np.random.Generator):
         return rng
-    if isinstance(rng, numbers.Integral) and not isinstance(rng, bool):
-        # default_rng(seed) is Generator(PCG64(SeedSequence(seed))): the seed's
-        # SeedSequence is kept, the same stream at a third of the cost (the tracker
-        # seeds generators every frame).
-        return np.random.Generator(np.random.PCG64(_seed_sequence(int(rng))))
     if rng is None or isinstance(rng, numbers.Integral):
         return np.random.default_rng(rng)
     raise ValueError(

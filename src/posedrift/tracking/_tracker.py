@@ -202,11 +202,12 @@ class PoseTracker:
         Smallest starting sigma (metres) of a warm-started registration.
     low_rank : int or None
         Rank of CPD's low-rank kernel: the number of Nyström landmarks (24 by
-        default). The angle error does not depend on it between 16 landmarks and
-        the exact kernel (None), within the run-to-run spread, on synthetic clips
-        and on real recordings, while the registration's cost grows with it:
-        about 3.3 ms a frame at 24 landmarks, 5.7 at 60 and 25 with the exact
-        kernel, on one AVX2 core (docs/RESULTS.md, "Fewer landmarks").
+        default); None for the exact kernel. The angle error did not move with it
+        beyond the run-to-run spread, from 16 landmarks to the exact kernel on
+        synthetic clips and between 24 and 60 on real recordings, while the
+        registration's cost grows with it: about 3.3 ms a frame at 24 landmarks,
+        5.7 at 60 and 25 with the exact kernel, on one AVX2 core (docs/RESULTS.md,
+        "Fewer landmarks").
     alpha : float
         Steepness (1/m) of Algorithm 2's sigmoid.
     height : float, optional
