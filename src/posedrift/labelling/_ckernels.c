@@ -1,20 +1,5 @@
-/* Compiled kernels of posedrift.labelling: geodesic Dijkstra, the forest's descent and
- * its joint votes.
- *
- * dijkstra(indptr, indices, data, n, sources, limits, out) -> None
- *   Shortest paths from several sources over a CSR graph (Algorithm 2's geodesics).
- *   indptr  : (n + 1,) int32 buffer, CSR row pointers
- *   indices : (nnz,) int32 buffer, CSR column indices (the edges u -> v)
- *   data    : (nnz,) float64 buffer, non-negative edge lengths
- *   sources : (S,) int64 buffer, the source vertex of each run
- *   limits  : (S,) float64 buffer, a run's exact range: vertices further away get some
- *             finite distance above the limit (the length of a path to them), unreachable
- *             ones +inf; pass +inf for exact distances everywhere
- *   out     : (S, n) float64 C-contiguous buffer, written
- *   Every distance within the limit is the same double as scipy.sparse.csgraph.dijkstra
- *   (directed=True) gives: a settled vertex's distance is the smallest fl(d(u) + w(u, v))
- *   over its settled neighbours u, whatever the heap. Binary heap with lazy deletion; the
- *   vertices beyond the limit are then only marked reachable, breadth first.
+/* Compiled kernels of posedrift.labelling: the forest's descent and its joint votes,
+ * relabelling's k-NN graph and geodesic distances.
  *
  * descend(table, image, rows, cols, row_scale, col_scale, roots, levels, height, width, out)
  *   The body-part forest's descent (BodyPartForest._descend_frame), every (tree, pixel)
@@ -59,14 +44,21 @@
  *
  * part_distances(points, n, anchors, n_anchors, k, labels, reach, indptr, indices, data, out)
  *   relabelling's _part_distances in one call: each anchor's source vertex (the nearest
- *   point carrying its part's label where the part has points, else the nearest point),
- *   a Dijkstra run per distinct source (exact within the largest reach of its anchors
- *   less their gaps, plus 1e-9 and 1e-12 of it), and per part the smallest over its
- *   anchors of run + gap. The same doubles as the NumPy code.
+ *   point carrying its part's label where the part has points, else the nearest point)
+ *   and its Euclidean gap to it; then per part one Dijkstra search from all its anchors'
+ *   sources at once, each starting at its gap, so that a point's distance is the smallest
+ *   over the part's anchors of gap + path length. Binary heap with lazy deletion. Exact
+ *   within the part's reach (plus 1e-9 and 1e-12 of it); the vertices beyond it only get
+ *   the length of some path to them (breadth first), above the reach. Within the reach,
+ *   the same doubles as scipy.sparse.csgraph.dijkstra from a vertex joined to the sources
+ *   by edges of their gaps (_part_distances' NumPy code): a settled vertex's distance is
+ *   the smallest fl(d(u) + w(u, v)) over its settled neighbours u, whatever the heap.
  *   points  : (n, 3) float64; anchors: (n_anchors, 3) float64, part j's k anchors in rows
  *             j k .. j k + k - 1, a NaN row for a missing one
  *   labels  : (n,) int64, or an empty buffer for none; reach: (n_anchors / k,) float64,
- *             or an empty buffer for exact distances everywhere
+ *             or an empty buffer (or NaN) for exact distances everywhere
+ *   indptr  : (n + 1,) int32; indices: (nnz,) int32; data: (nnz,) float64 non-negative:
+ *             the graph in CSR (every edge stored in both of its rows)
  *   out     : (n_anchors / k, n) float64, written; inf for unreachable points and parts
  *             without anchors
  *
@@ -135,15 +127,25 @@ static int get_buffer(PyObject *obj, Py_buffer *view, int writable, Py_ssize_t i
     return 0;
 }
 
-/* One Dijkstra run from `source` into dist (n), exact within `limit` (see dijkstra);
- * heap: nnz + 1 items, queue: n + 1 vertices of work space. */
+/* One Dijkstra search from several sources, each starting at its own distance, into dist
+ * (n): exact within `limit`; beyond it a vertex only gets the length of some path to it
+ * (breadth first), and unreachable ones +inf. heap: nnz + n_sources items, queue:
+ * n + n_sources vertices of work space. */
 static void dijkstra_run(const int32_t *indptr, const int32_t *indices, const double *data,
-                         Py_ssize_t n, int32_t source, double limit, double *dist, item *heap,
+                         Py_ssize_t n, const int32_t *sources, const double *starts,
+                         Py_ssize_t n_sources, double limit, double *dist, item *heap,
                          int32_t *queue) {
     for (Py_ssize_t v = 0; v < n; v++) dist[v] = INFINITY;
     Py_ssize_t size = 0, tail = 0;
-    dist[source] = 0.0;
-    heap_push(heap, &size, 0.0, source);
+    for (Py_ssize_t s = 0; s < n_sources; s++) {
+        const int32_t v = sources[s];
+        if (!(starts[s] < dist[v])) continue;
+        dist[v] = starts[s];
+        if (starts[s] <= limit)
+            heap_push(heap, &size, starts[s], v);
+        else
+            queue[tail++] = v;
+    }
     while (size > 0) {
         item top = heap_pop(heap, &size);
         if (top.key > dist[top.node]) continue; /* stale entry */
@@ -174,102 +176,6 @@ static void dijkstra_run(const int32_t *indptr, const int32_t *indices, const do
             }
         }
     }
-}
-
-static PyObject *dijkstra(PyObject *self, PyObject *args) {
-    (void)self;
-    PyObject *o_indptr, *o_indices, *o_data, *o_sources, *o_limits, *o_out;
-    Py_ssize_t n;
-    if (!PyArg_ParseTuple(args, "OOOnOOO", &o_indptr, &o_indices, &o_data, &n, &o_sources,
-                          &o_limits, &o_out))
-        return NULL;
-    Py_buffer b_indptr, b_indices, b_data, b_sources, b_limits, b_out;
-    if (n < 0 || n > INT32_MAX) {
-        PyErr_SetString(PyExc_ValueError, "dijkstra: bad vertex count");
-        return NULL;
-    }
-    if (get_buffer(o_indptr, &b_indptr, 0, 4, n + 1, "indptr") < 0) return NULL;
-    const int32_t *indptr = (const int32_t *)b_indptr.buf;
-    Py_ssize_t nnz = indptr[n];
-    if (nnz < 0 || get_buffer(o_indices, &b_indices, 0, 4, nnz, "indices") < 0) {
-        if (nnz < 0) PyErr_SetString(PyExc_ValueError, "dijkstra: bad indptr");
-        PyBuffer_Release(&b_indptr);
-        return NULL;
-    }
-    if (get_buffer(o_data, &b_data, 0, 8, nnz, "data") < 0) {
-        PyBuffer_Release(&b_indptr);
-        PyBuffer_Release(&b_indices);
-        return NULL;
-    }
-    Py_ssize_t n_sources = 0;
-    if (PyObject_GetBuffer(o_sources, &b_sources, PyBUF_C_CONTIGUOUS) < 0) {
-        PyBuffer_Release(&b_indptr);
-        PyBuffer_Release(&b_indices);
-        PyBuffer_Release(&b_data);
-        return NULL;
-    }
-    n_sources = b_sources.len / 8;
-    if (b_sources.itemsize != 8 ||
-        get_buffer(o_limits, &b_limits, 0, 8, n_sources, "limits") < 0) {
-        if (b_sources.itemsize != 8)
-            PyErr_SetString(PyExc_ValueError, "dijkstra: 'sources' must be int64");
-        PyBuffer_Release(&b_indptr);
-        PyBuffer_Release(&b_indices);
-        PyBuffer_Release(&b_data);
-        PyBuffer_Release(&b_sources);
-        return NULL;
-    }
-    if (get_buffer(o_out, &b_out, 1, 8, n_sources * n, "out") < 0) {
-        PyBuffer_Release(&b_indptr);
-        PyBuffer_Release(&b_indices);
-        PyBuffer_Release(&b_data);
-        PyBuffer_Release(&b_sources);
-        PyBuffer_Release(&b_limits);
-        return NULL;
-    }
-    const int32_t *indices = (const int32_t *)b_indices.buf;
-    const double *data = (const double *)b_data.buf;
-    const int64_t *sources = (const int64_t *)b_sources.buf;
-    const double *limits = (const double *)b_limits.buf;
-    double *out = (double *)b_out.buf;
-    int ok = 1;
-    for (Py_ssize_t e = 0; e < nnz && ok; e++)
-        if (indices[e] < 0 || indices[e] >= n || !(data[e] >= 0.0)) ok = 0;
-    for (Py_ssize_t v = 0; v < n && ok; v++)
-        if (indptr[v] > indptr[v + 1] || indptr[v] < 0) ok = 0;
-    for (Py_ssize_t s = 0; s < n_sources && ok; s++)
-        if (sources[s] < 0 || sources[s] >= n) ok = 0;
-    item *heap = ok ? (item *)malloc(sizeof(item) * (size_t)(nnz + 1)) : NULL;
-    int32_t *queue = heap ? (int32_t *)malloc(sizeof(int32_t) * (size_t)(n + 1)) : NULL;
-    if (!ok || heap == NULL || queue == NULL) {
-        free(heap);
-        PyBuffer_Release(&b_indptr);
-        PyBuffer_Release(&b_indices);
-        PyBuffer_Release(&b_data);
-        PyBuffer_Release(&b_sources);
-        PyBuffer_Release(&b_limits);
-        PyBuffer_Release(&b_out);
-        if (!ok) {
-            PyErr_SetString(PyExc_ValueError,
-                            "dijkstra: invalid graph (indices, negative lengths) or sources");
-            return NULL;
-        }
-        return PyErr_NoMemory();
-    }
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t s = 0; s < n_sources; s++)
-        dijkstra_run(indptr, indices, data, n, (int32_t)sources[s], limits[s], out + s * n, heap,
-                     queue);
-    Py_END_ALLOW_THREADS
-    free(heap);
-    free(queue);
-    PyBuffer_Release(&b_indptr);
-    PyBuffer_Release(&b_indices);
-    PyBuffer_Release(&b_data);
-    PyBuffer_Release(&b_sources);
-    PyBuffer_Release(&b_limits);
-    PyBuffer_Release(&b_out);
-    Py_RETURN_NONE;
 }
 
 static PyObject *descend(PyObject *self, PyObject *args) {
@@ -790,22 +696,18 @@ static PyObject *part_distances(PyObject *self, PyObject *args) {
         if (indptr[v] > indptr[v + 1] || indptr[v] < 0) ok = 0;
     if (!ok && !PyErr_Occurred())
         PyErr_SetString(PyExc_ValueError, "part_distances: invalid graph (indices, lengths)");
-    /* work: per anchor its source and gap; per point its run's slot; per slot its limit and
-     * distances; the heap and queue of the runs */
-    int32_t *source = NULL, *slot_of = NULL, *queue = NULL;
-    double *gap = NULL, *limit = NULL, *runs = NULL;
+    /* work: per anchor its source and gap; the heap and queue of the searches */
+    int32_t *source = NULL, *queue = NULL;
+    double *gap = NULL;
     unsigned char *has = NULL;
     item *heap = NULL;
     if (ok) {
         source = (int32_t *)malloc(sizeof(int32_t) * (size_t)(n_anchors + 1));
-        slot_of = (int32_t *)malloc(sizeof(int32_t) * (size_t)n);
-        queue = (int32_t *)malloc(sizeof(int32_t) * (size_t)(n + 1));
+        queue = (int32_t *)malloc(sizeof(int32_t) * (size_t)(n + k + 1));
         gap = (double *)malloc(sizeof(double) * (size_t)(n_anchors + 1));
-        limit = (double *)malloc(sizeof(double) * (size_t)(n_anchors + 1));
-        runs = (double *)malloc(sizeof(double) * (size_t)((n_anchors + 1) * n));
         has = (unsigned char *)calloc((size_t)(n_parts + 1), 1);
-        heap = (item *)malloc(sizeof(item) * (size_t)(nnz + 1));
-        if (!source || !slot_of || !queue || !gap || !limit || !runs || !has || !heap) {
+        heap = (item *)malloc(sizeof(item) * (size_t)(nnz + k + 1));
+        if (!source || !queue || !gap || !has || !heap) {
             ok = 0;
             PyErr_NoMemory();
         }
@@ -820,67 +722,46 @@ static PyObject *part_distances(PyObject *self, PyObject *args) {
         if (lab)
             for (Py_ssize_t v = 0; v < n; v++)
                 if (lab[v] >= 0 && lab[v] < n_parts) has[lab[v]] = 1;
-        for (Py_ssize_t v = 0; v < n; v++) slot_of[v] = -1;
-        Py_ssize_t n_slots = 0;
-        for (Py_ssize_t a = 0; a < n_anchors; a++) {
-            const double ax = anc[3 * a], ay = anc[3 * a + 1], az = anc[3 * a + 2];
-            source[a] = -1;
-            if (!(isfinite(ax) && isfinite(ay) && isfinite(az))) continue;
-            const Py_ssize_t part = a / k;
-            const int own = lab != NULL && has[part];
-            /* the first nearest, as np.argmin over the row with the others at +inf
-             * (index 0 where every candidate is infinitely far) */
-            double best = INFINITY;
-            int32_t arg = 0;
-            for (Py_ssize_t v = 0; v < n; v++) {
-                if (own && lab[v] != part) continue;
-                const double dx = ax - p[3 * v], dy = ay - p[3 * v + 1], dz = az - p[3 * v + 2];
-                const double d2 = dx * dx + dy * dy + dz * dz;
-                if (d2 < best) {
-                    best = d2;
-                    arg = (int32_t)v;
-                }
-            }
-            source[a] = arg;
-            gap[a] = sqrt(best);
-            if (slot_of[arg] < 0) {
-                slot_of[arg] = (int32_t)n_slots;
-                limit[n_slots++] = -INFINITY;
-            }
-            if (reach) { /* np.fmax: a NaN reach leaves the limit as it is */
-                const double l = reach[part] - gap[a];
-                if (l > limit[slot_of[arg]]) limit[slot_of[arg]] = l;
-            }
-        }
-        for (Py_ssize_t q = 0; q < n_slots; q++) {
-            const double l = limit[q];
-            limit[q] = (reach && l > -INFINITY) ? (l + 1e-9) + 1e-12 * fabs(l) : INFINITY;
-        }
-        for (Py_ssize_t v = 0; v < n; v++)
-            if (slot_of[v] >= 0)
-                dijkstra_run(indptr, indices, data, n, (int32_t)v, limit[slot_of[v]],
-                             runs + (Py_ssize_t)slot_of[v] * n, heap, queue);
         for (Py_ssize_t j = 0; j < n_parts; j++) {
-            double *row = out + j * n;
-            for (Py_ssize_t v = 0; v < n; v++) row[v] = INFINITY;
+            /* The part's anchors with their sources, packed to the front of its rows. */
+            Py_ssize_t count = 0;
+            const int own = lab != NULL && has[j];
             for (Py_ssize_t a = j * k; a < j * k + k; a++) {
-                if (source[a] < 0) continue;
-                const double *run = runs + (Py_ssize_t)slot_of[source[a]] * n;
-                const double g = gap[a];
+                const double ax = anc[3 * a], ay = anc[3 * a + 1], az = anc[3 * a + 2];
+                if (!(isfinite(ax) && isfinite(ay) && isfinite(az))) continue;
+                /* the first nearest, as np.argmin over the row with the others at +inf
+                 * (index 0 where every candidate is infinitely far) */
+                double best = INFINITY;
+                int32_t arg = 0;
                 for (Py_ssize_t v = 0; v < n; v++) {
-                    const double val = run[v] + g;
-                    if (val < row[v]) row[v] = val;
+                    if (own && lab[v] != j) continue;
+                    const double dx = ax - p[3 * v], dy = ay - p[3 * v + 1],
+                                 dz = az - p[3 * v + 2];
+                    const double d2 = dx * dx + dy * dy + dz * dz;
+                    if (d2 < best) {
+                        best = d2;
+                        arg = (int32_t)v;
+                    }
                 }
+                source[j * k + count] = arg;
+                gap[j * k + count++] = sqrt(best);
             }
+            double *row = out + j * n;
+            if (count == 0) {
+                for (Py_ssize_t v = 0; v < n; v++) row[v] = INFINITY;
+                continue;
+            }
+            /* exact within the reach, plus 1e-9 and 1e-12 of it (a NaN reach: everywhere) */
+            const double r = reach ? reach[j] : INFINITY;
+            const double limit = isnan(r) ? INFINITY : (r + 1e-9) + 1e-12 * fabs(r);
+            dijkstra_run(indptr, indices, data, n, source + j * k, gap + j * k, count, limit,
+                         row, heap, queue);
         }
         Py_END_ALLOW_THREADS
     }
     free(source);
-    free(slot_of);
     free(queue);
     free(gap);
-    free(limit);
-    free(runs);
     free(has);
     free(heap);
     for (int q = 0; q < got; q++) PyBuffer_Release(&b[q]);
@@ -903,8 +784,6 @@ static PyMethodDef methods[] = {
     {"part_distances", part_distances, METH_VARARGS,
      "part_distances(points, n, anchors, n_anchors, k, labels, reach, indptr, indices, data, "
      "out): relabelling's geodesic distance of every point from every part."},
-    {"dijkstra", dijkstra, METH_VARARGS,
-     "dijkstra(indptr, indices, data, n, sources, limits, out): multi-run Dijkstra."},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef module = {

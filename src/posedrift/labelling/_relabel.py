@@ -236,7 +236,7 @@ def _part_distances(
     n_parts, k = anchors.shape[:2]
     flat = anchors.reshape(-1, 3)
     if compiled and _ckernels is not None and len(points):
-        # The same doubles in one compiled call (sources, runs, minimum over anchors).
+        # The same doubles in one compiled call (the sources, one search per part).
         matrix = graph.matrix
         out = np.empty((n_parts, len(points)))
         _ckernels.part_distances(
@@ -253,62 +253,35 @@ def _part_distances(
             out,
         )
         return out
+    from scipy.sparse.csgraph import dijkstra
+
     part_of = np.repeat(np.arange(n_parts), k)
     valid = np.flatnonzero(np.isfinite(flat).all(axis=1))
+    out = np.full((n_parts, len(points)), np.inf)
     if len(valid) == 0:
-        return np.full((n_parts, len(points)), np.inf)
+        return out
     part_of = part_of[valid]
     sources, gap = _anchor_sources(points, flat[valid], part_of, labels)
-    unique, inverse = np.unique(sources, return_inverse=True)
-    limits = None
-    if reach is not None:
-        # A source's search may stop beyond the largest reach of its anchors (less their
-        # gaps): a part's distance at most its reach comes from a path within that limit;
-        # beyond it every path, hence every value, is longer than the reach.
-        limits = np.full(len(unique), -np.inf)
-        np.fmax.at(limits, inverse, reach[part_of] - gap)
-        with np.errstate(invalid="ignore"):  # -inf (only NaN reaches) + inf: NaN
-            limits = limits + 1e-9 + 1e-12 * np.abs(limits)
-        limits[~(limits > -np.inf)] = np.inf  # a NaN reach: exact distances
-    geo = _dijkstra(graph.matrix, unique, limits)[inverse]
-    geo += gap[:, None]
-    # The smallest distance over each part's anchors.
-    per_anchor = np.full((n_parts * k, len(points)), np.inf)
-    per_anchor[valid] = geo
-    out = per_anchor.reshape(n_parts, k, -1).min(axis=1)
-    return out
-
-
-def _dijkstra(
-    matrix: sparse.csr_matrix, sources: np.ndarray, limits: np.ndarray | None = None
-) -> np.ndarray:
-    """Shortest-path lengths ``(S, N)`` from each source over a symmetric graph.
-
-    The compiled kernel where it is built, else ``scipy.sparse.csgraph.dijkstra`` (the
-    same doubles: see ``_ckernels.c``). ``limits`` (S,): a run's exact range; beyond
-    it a vertex may get the length of any path to it instead of the shortest (the
-    compiled kernel stops its search there). Unreachable vertices get ``inf``.
-    """
-    n = matrix.shape[0]
-    sources = np.ascontiguousarray(sources, dtype=np.int64)
-    if _ckernels is None:
-        from scipy.sparse.csgraph import dijkstra
-
-        # The graph is symmetric: the directed search over its stored edges is the
-        # undirected one. Exact everywhere (limits are only a licence to stop early).
-        return dijkstra(matrix, directed=True, indices=sources)
-    if limits is None:
-        limits = np.full(len(sources), np.inf)
-    out = np.empty((len(sources), n))
-    _ckernels.dijkstra(
-        np.ascontiguousarray(matrix.indptr, dtype=np.int32),
-        np.ascontiguousarray(matrix.indices, dtype=np.int32),
-        np.ascontiguousarray(matrix.data, dtype=np.float64),
-        n,
-        sources,
-        np.ascontiguousarray(limits, dtype=np.float64),
-        out,
-    )
+    # One search per part from an extra vertex joined to its anchors' sources by their
+    # gaps (the shortest where anchors share a source): the same doubles as the
+    # compiled search, exact everywhere (the reach only lets that one stop early).
+    n = len(points)
+    key = part_of * n + sources
+    order = np.lexsort((gap, key))
+    first = order[np.r_[True, key[order][1:] != key[order][:-1]]]
+    parts = np.unique(part_of)
+    extra = n + np.searchsorted(parts, part_of[first])
+    matrix = graph.matrix.tocoo()
+    rows = np.concatenate([matrix.row, extra])
+    cols = np.concatenate([matrix.col, sources[first]])
+    lengths = np.concatenate([matrix.data, gap[first]])
+    size = n + len(parts)
+    # Built as CSR directly: the gaps may be 0, which a conversion could drop.
+    by_row = np.argsort(rows, kind="stable")
+    indptr = np.zeros(size + 1, dtype=np.int64)
+    np.cumsum(np.bincount(rows, minlength=size), out=indptr[1:])
+    joined = sparse.csr_matrix((lengths[by_row], cols[by_row], indptr), shape=(size, size))
+    out[parts] = dijkstra(joined, directed=True, indices=n + np.arange(len(parts)))[:, :n]
     return out
 
 
