@@ -11,6 +11,7 @@ from posedrift.points import sample_humanoid
 from posedrift.registration import (
     ConvergenceWarning,
     CPDResult,
+    _cpd,
     _estep,
     register_affine,
     register_nonrigid,
@@ -583,6 +584,49 @@ def test_accelerated_em_max_iter_counts_m_steps(body):
     with pytest.warns(ConvergenceWarning, match="max_iter=5"):
         res = register_nonrigid(body, _smooth_warp(body), max_iter=5, accelerate=True)
     assert res.iterations == 5 and not res.converged
+
+
+@pytest.mark.parametrize(
+    "options",
+    [{}, {"accelerate": False}, {"dtype": np.float32}, {"max_iter": 5}, {"outlier_weight": 0.0}],
+)
+def test_compiled_loop_takes_the_python_loops_steps(body, options, monkeypatch):
+    if not _estep.has_compiled_kernel():
+        pytest.skip("the compiled kernels are not built (no C compiler at install)")
+    truth, target = _noisy_problem(body)
+    runs = {}
+    for compiled_loop in (True, False):
+        monkeypatch.setattr(_cpd, "_COMPILED_LOOP", compiled_loop)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            first = register_nonrigid(body, target, low_rank=24, **options)
+            warm = register_nonrigid(body, truth, low_rank=24, warm_start=first, **options)
+        runs[compiled_loop] = (first, warm)
+    for fused, loop in zip(runs[True], runs[False], strict=True):
+        assert (fused.iterations, fused.converged) == (loop.iterations, loop.converged)
+        # The same steps; only the sums round differently: a nanometre at most.
+        np.testing.assert_allclose(fused.moved, loop.moved, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(fused.apply(truth), loop.apply(truth), rtol=0, atol=1e-9)
+        assert fused.sigma2 == pytest.approx(loop.sigma2, rel=1e-6)
+        assert fused.objective == pytest.approx(loop.objective, rel=1e-9)
+    if not options:  # the defaults fit the noisy target within 3 mm
+        assert _rms(runs[True][0].moved, truth) < 3e-3
+
+
+def test_compiled_loop_hands_a_failed_cholesky_back():
+    if not _estep.has_compiled_kernel():
+        pytest.skip("the compiled kernels are not built (no C compiler at install)")
+    pts = np.random.default_rng(2).normal(size=(40, 3))
+    order = np.arange(40, dtype=np.int64)
+    factor = np.zeros((4, 40))
+    factor[0] = 0.5  # three zero rows and no regularizer left: a singular M-step system
+    args = (pts, pts, factor, 1, 0.1, 5e-324, 1e-10, 1e-3, False, 1e-5, 10, True, order, order)
+    assert _cpd._compiled_loop(*args) is None
+    with pytest.raises(ValueError, match="em_lowrank: need"):
+        _estep._cestep.em_lowrank(
+            pts, pts, factor[:3], 40, 40, 3, 3, 0.1, 1.0, 1e-10, 1e-12, 1e-3, False, 1e-5, 10,
+            True, order, order, np.empty((3, 3)), np.empty((40, 3)),
+        )  # fmt: skip
 
 
 def test_auto_polishes_noise_free_fits_with_the_exact_kernel(body):

@@ -1,4 +1,4 @@
-/* Fused CPD E-step and low-rank M-step: no M x N array, one call per EM half-step.
+/* Fused CPD E-step and low-rank M-step (no M x N array), and the low-rank EM loop.
  *
  * estep(target, moved, n, m, d, sigma2, c, eps, single, p1, pt1, px, order[, target_order])
  *     -> (sum_n log(den_n), sum_m P1_m, sum_n Pt1_n |x_n|^2)
@@ -24,6 +24,17 @@
  *   K a multiple of 4: pad Z with zero columns, whose U rows come out 0):
  *   U = (Z' dP1 Z + reg I)^-1 Z' (P X - dP1 Y) (K, D) into u, moved = Y + Z U (M, D).
  *   ok = 0 when the K x K Cholesky fails (the caller falls back to a checked solve).
+ *
+ * em_lowrank(target, source, zt, n, m, k, d, w, lambda, floor, eps, sigma2, single, tol,
+ *            max_iter, accelerate, order, target_order, u, moved)
+ *     -> (ok, iterations, converged, sigma2, objective, c, sum P1)
+ *   register_nonrigid's EM loop with a fixed low-rank factor in one call, step for step
+ *   as its Python loop (SQUAREM every second M-step, kept only where the objective is no
+ *   worse), from U = 0, moved = source and the given sigma2; estep and lowrank_mstep as
+ *   above (eps the truncation). u (K, D) and moved (M, D) are written with the final
+ *   iterate. Its sums (|U|^2, the steplength's) run in order where the Python loop's are
+ *   NumPy's and BLAS's, so the two agree to rounding. ok = 0 when an M-step's Cholesky
+ *   fails: the caller then runs its own loop, which solves that step with checks.
  *
  * label_mass(target, moved, n, m, d, sigma2, c, labels, n_labels, out[, axis, h])
  *   The posterior mass of each label's source points per target point (the tracker's
@@ -434,39 +445,17 @@ static int sort_order(int64_t *order, const double *key, Py_ssize_t m, Py_ssize_
     return 1;
 }
 
-static PyObject *py_estep(PyObject *self, PyObject *args) {
-    Py_buffer bx, bm, bp1, bpt1, bpx, bord, btord = {0};
-    Py_ssize_t n, m, d;
-    double sigma2, c, eps;
-    int single;
-    if (!PyArg_ParseTuple(args, "y*y*nnndddpw*w*w*w*|w*", &bx, &bm, &n, &m, &d, &sigma2, &c,
-                          &eps, &single, &bp1, &bpt1, &bpx, &bord, &btord))
-        return NULL;
-    PyObject *result = NULL;
-    void *work = NULL;
-    if (n < 1 || m < 1 || d < 1 || !(sigma2 > 0.0) || !(c >= 0.0)) {
-        PyErr_SetString(PyExc_ValueError, "_cestep.estep: need n, m, d >= 1, sigma2 > 0, c >= 0");
-        goto done;
-    }
-    if (check_buf(&bx, n * d, 8, "estep", "target") || check_buf(&bm, m * d, 8, "estep", "moved") ||
-        check_buf(&bp1, m, 8, "estep", "p1") || check_buf(&bpt1, n, 8, "estep", "pt1") ||
-        check_buf(&bpx, m * d, 8, "estep", "px") || check_buf(&bord, m, 8, "estep", "order") ||
-        (btord.buf && check_buf(&btord, n, 8, "estep", "target_order")))
-        goto done;
-    const double *x = (const double *)bx.buf, *mv = (const double *)bm.buf;
-    double *p1 = (double *)bp1.buf, *pt1 = (double *)bpt1.buf, *px = (double *)bpx.buf;
-    int64_t *order = (int64_t *)bord.buf, *torder = (int64_t *)btord.buf;
-    /* work: p1s (M) + pxt (D M) float64, mt (D M) + row (M) + xf (N D) in the kernel's type */
-    const size_t item = single ? sizeof(float) : sizeof(double);
-    work = calloc((size_t)(m + d * m) * sizeof(double) + (size_t)(d * m + m + n * d) * item, 1);
-    if (!work) {
-        PyErr_NoMemory();
-        goto done;
-    }
+/* The E-step proper (estep's sums into p1, pt1 and px; returns sum_n log den_n, and
+ * sum P1 and sum Pt1 |x|^2 through np_out and xpx_out). work: (M + D M) doubles, then
+ * (D M + M + N D) items of the kernel's type (float32 when single, else float64). */
+static double estep_core(const double *x, const double *mv, Py_ssize_t n, Py_ssize_t m,
+                         Py_ssize_t d, double sigma2, double c, double eps, int single,
+                         double *p1, double *pt1, double *px, int64_t *order, int64_t *torder,
+                         void *work, double *np_out, double *xpx_out) {
     double *p1s = (double *)work, *pxt = p1s + m;
     char *tail = (char *)(pxt + d * m);
     double log_den, np_ = 0.0, xpx = 0.0;
-    Py_BEGIN_ALLOW_THREADS
+    memset(p1s, 0, sizeof(double) * (size_t)(m + d * m));
     /* truncation half-width along the longest axis of the moved source */
     double h = 0.0;
     Py_ssize_t axis = 0;
@@ -521,6 +510,45 @@ static PyObject *py_estep(PyObject *self, PyObject *args) {
         xpx += pt1[i] * r2;
     }
 #undef PERM
+    *np_out = np_;
+    *xpx_out = xpx;
+    return log_den;
+}
+
+static size_t estep_work_bytes(Py_ssize_t n, Py_ssize_t m, Py_ssize_t d, int single) {
+    const size_t item = single ? sizeof(float) : sizeof(double);
+    return (size_t)(m + d * m) * sizeof(double) + (size_t)(d * m + m + n * d) * item;
+}
+
+static PyObject *py_estep(PyObject *self, PyObject *args) {
+    Py_buffer bx, bm, bp1, bpt1, bpx, bord, btord = {0};
+    Py_ssize_t n, m, d;
+    double sigma2, c, eps;
+    int single;
+    if (!PyArg_ParseTuple(args, "y*y*nnndddpw*w*w*w*|w*", &bx, &bm, &n, &m, &d, &sigma2, &c,
+                          &eps, &single, &bp1, &bpt1, &bpx, &bord, &btord))
+        return NULL;
+    PyObject *result = NULL;
+    void *work = NULL;
+    if (n < 1 || m < 1 || d < 1 || !(sigma2 > 0.0) || !(c >= 0.0)) {
+        PyErr_SetString(PyExc_ValueError, "_cestep.estep: need n, m, d >= 1, sigma2 > 0, c >= 0");
+        goto done;
+    }
+    if (check_buf(&bx, n * d, 8, "estep", "target") || check_buf(&bm, m * d, 8, "estep", "moved") ||
+        check_buf(&bp1, m, 8, "estep", "p1") || check_buf(&bpt1, n, 8, "estep", "pt1") ||
+        check_buf(&bpx, m * d, 8, "estep", "px") || check_buf(&bord, m, 8, "estep", "order") ||
+        (btord.buf && check_buf(&btord, n, 8, "estep", "target_order")))
+        goto done;
+    work = malloc(estep_work_bytes(n, m, d, single));
+    if (!work) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    double log_den, np_, xpx;
+    Py_BEGIN_ALLOW_THREADS
+    log_den = estep_core((const double *)bx.buf, (const double *)bm.buf, n, m, d, sigma2, c, eps,
+                         single, (double *)bp1.buf, (double *)bpt1.buf, (double *)bpx.buf,
+                         (int64_t *)bord.buf, (int64_t *)btord.buf, work, &np_, &xpx);
     Py_END_ALLOW_THREADS
     result = Py_BuildValue("(ddd)", log_den, np_, xpx);
 done:
@@ -695,6 +723,242 @@ done:
     return result;
 }
 
+/* Whether v is finite, from its bits (this file is built with -ffinite-math-only). */
+static inline int finite_bits(double v) {
+    uint64_t u;
+    memcpy(&u, &v, sizeof u);
+    return ((u >> 52) & 0x7ffu) != 0x7ffu;
+}
+
+static inline double relative_change(double new_, double old) {
+    const double scale = fabs(new_) > 1e-300 ? fabs(new_) : 1e-300;
+    return fabs(new_ - old) / scale;
+}
+
+/* One EM iterate: the field's coordinates u (K, D), the moved source (M, D), sigma^2. */
+typedef struct {
+    double *u, *mv, s2;
+} em_state;
+
+/* The E-step's statistics at an iterate, its outlier term and objective. */
+typedef struct {
+    double *p1, *pt1, *px, log_den, np_, xpx, c, obj;
+} em_stats;
+
+typedef struct {
+    const double *x, *src, *zt;
+    Py_ssize_t n, m, k, d;
+    double w, lam, floor, eps;
+    int single;
+    int64_t *order, *torder;
+    void *estep_work;
+    double *mstep_work;
+} em_problem;
+
+static void em_estep(const em_problem *pb, const em_state *s, em_stats *st) {
+    const Py_ssize_t n = pb->n, m = pb->m, d = pb->d;
+    /* outlier_constant, operation for operation */
+    st->c = pb->w == 0.0 ? 0.0
+                         : pow(2.0 * 3.141592653589793 * s->s2, (double)d / 2.0) * pb->w /
+                               (1.0 - pb->w) * (double)m / (double)n;
+    st->log_den = estep_core(pb->x, s->mv, n, m, d, s->s2, st->c, pb->eps, pb->single, st->p1,
+                             st->pt1, st->px, pb->order, pb->torder, pb->estep_work, &st->np_,
+                             &st->xpx);
+    double reg = 0.0; /* tr(W' G W) = |U|^2 with G ~ Z Z' */
+    for (Py_ssize_t i = 0; i < pb->k * d; ++i) reg += s->u[i] * s->u[i];
+    st->obj = -st->log_den + 0.5 * (double)n * (double)d * log(s->s2) + 0.5 * pb->lam * reg;
+}
+
+static int em_mstep(const em_problem *pb, const em_stats *st, double s2, em_state *out) {
+    const Py_ssize_t m = pb->m, k = pb->k, d = pb->d;
+    double pxm, tpt;
+    memset(pb->mstep_work, 0, sizeof(double) * (size_t)(k * k + d * k + 2 * d * m));
+    if (!lowrank_core(pb->zt, st->p1, st->px, pb->src, m, k, d, s2 * pb->lam, out->u, out->mv,
+                      pb->mstep_work, &pxm, &tpt))
+        return 0;
+    const double s2_new = fabs(st->xpx - 2.0 * pxm + tpt) / (st->np_ * (double)d);
+    out->s2 = s2_new > pb->floor ? s2_new : pb->floor;
+    return 1;
+}
+
+/* The accelerated low-rank EM loop of register_nonrigid (its Python loop, step for step:
+ * SQUAREM scheme S3 every second M-step, the extrapolation kept only when its objective
+ * is no worse). 0 when an M-step's Cholesky fails (the caller then runs its own loop). */
+static int em_loop(const em_problem *pb, em_state *states, em_stats *stats, double s2_0,
+                   double tol, Py_ssize_t max_iter, int accelerate, Py_ssize_t *it_out,
+                   int *converged_out, em_state **final, em_stats **final_stats) {
+    const Py_ssize_t m = pb->m, k = pb->k, d = pb->d;
+    em_state *cur = &states[0];
+    em_stats *st = &stats[0], *spare = &stats[1];
+    memset(cur->u, 0, sizeof(double) * (size_t)(k * d));
+    memcpy(cur->mv, pb->src, sizeof(double) * (size_t)(m * d));
+    cur->s2 = s2_0;
+    em_estep(pb, cur, st);
+    double objective = st->obj, obj_1;
+    double step_max = 4.0;
+    Py_ssize_t it = 0;
+    int converged = 0;
+#define OTHER(a, b, c) \
+    (&states[0] != (a) && &states[0] != (b) && &states[0] != (c) ? &states[0] \
+     : &states[1] != (a) && &states[1] != (b) && &states[1] != (c) ? &states[1] \
+     : &states[2] != (a) && &states[2] != (b) && &states[2] != (c) ? &states[2] \
+                                                                   : &states[3])
+    for (;;) {
+        if (it >= max_iter) break;
+        if (st->np_ <= 0.0) { /* every target point is an outlier: nothing to fit */
+            converged = 1;
+            break;
+        }
+        em_state *prev = cur, *next = OTHER(prev, prev, prev);
+        if (!em_mstep(pb, st, cur->s2, next)) return 0;
+        it++;
+        em_estep(pb, next, spare);
+        const int done = relative_change(spare->obj, objective) <= tol;
+        objective = spare->obj;
+        cur = next;
+        em_stats *t = st; st = spare; spare = t;
+        if (done) {
+            converged = 1;
+            break;
+        }
+        if (!accelerate || it + 2 > max_iter || st->np_ <= 0.0) continue;
+        em_state *th0 = prev, *th1 = cur, *th2 = OTHER(th0, th1, th1);
+        if (!em_mstep(pb, st, cur->s2, th2)) return 0;
+        it++;
+        double rr = 0.0, vv = 0.0;
+        for (Py_ssize_t i = 0; i < m * d; ++i) {
+            const double r = th1->mv[i] - th0->mv[i];
+            const double v = th2->mv[i] - th1->mv[i] - r;
+            rr += r * r;
+            vv += v * v;
+        }
+        double alpha = vv > 0.0 ? -sqrt(rr / vv) : -1.0;
+        alpha = alpha < -1.0 ? alpha : -1.0;
+        alpha = alpha > -step_max ? alpha : -step_max;
+        int fallback = 1;
+        if (alpha < -1.0) {
+            const double l0 = log(th0->s2), l1 = log(th1->s2), l2 = log(th2->s2);
+            double ls = l0 - 2.0 * alpha * (l1 - l0) + alpha * alpha * (l2 - 2.0 * l1 + l0);
+            double top = l0 > l1 ? l0 : l1;
+            top = top > l2 ? top : l2;
+            ls = ls < top + 5.0 ? ls : top + 5.0; /* no overflow; such a step is rejected */
+            em_state *ext = OTHER(th0, th1, th2);
+            for (Py_ssize_t i = 0; i < k * d; ++i)
+                ext->u[i] = th0->u[i] - 2.0 * alpha * (th1->u[i] - th0->u[i]) +
+                            alpha * alpha * (th2->u[i] - 2.0 * th1->u[i] + th0->u[i]);
+            for (Py_ssize_t i = 0; i < m * d; ++i)
+                ext->mv[i] = th0->mv[i] - 2.0 * alpha * (th1->mv[i] - th0->mv[i]) +
+                             alpha * alpha * (th2->mv[i] - 2.0 * th1->mv[i] + th0->mv[i]);
+            const double s2_ext = exp(ls);
+            ext->s2 = s2_ext > pb->floor ? s2_ext : pb->floor;
+            em_estep(pb, ext, spare);
+            if (finite_bits(spare->obj) && spare->obj <= objective) {
+                fallback = 0;
+                if (alpha <= -step_max) step_max *= 4.0;
+                cur = ext;
+                t = st; st = spare; spare = t;
+                obj_1 = objective;
+                objective = st->obj;
+            }
+        }
+        if (fallback) {
+            em_estep(pb, th2, spare);
+            cur = th2;
+            t = st; st = spare; spare = t;
+            obj_1 = objective;
+            objective = st->obj;
+        }
+        if (relative_change(objective, obj_1) <= tol) {
+            converged = 1;
+            break;
+        }
+    }
+#undef OTHER
+    *it_out = it;
+    *converged_out = converged;
+    *final = cur;
+    *final_stats = st;
+    return 1;
+}
+
+static PyObject *py_em_lowrank(PyObject *self, PyObject *args) {
+    Py_buffer bx, bsrc, bz, bord, btord, bu, bmv;
+    Py_ssize_t n, m, k, d, max_iter;
+    double w, lam, floor_, eps, s2_0, tol;
+    int single, accelerate;
+    if (!PyArg_ParseTuple(args, "y*y*y*nnnndddddpdnpw*w*w*w*", &bx, &bsrc, &bz, &n, &m, &k, &d,
+                          &w, &lam, &floor_, &eps, &s2_0, &single, &tol, &max_iter, &accelerate,
+                          &bord, &btord, &bu, &bmv))
+        return NULL;
+    PyObject *result = NULL;
+    double *mem = NULL;
+    void *ework = NULL;
+    if (n < 1 || m < 1 || k < 4 || k % 4 != 0 || d < 1 || !(s2_0 > 0.0) || !(lam > 0.0) ||
+        !(w >= 0.0 && w < 1.0) || max_iter < 0) {
+        PyErr_SetString(PyExc_ValueError,
+                        "_cestep.em_lowrank: need n, m, d >= 1, k >= 4 a multiple of 4, "
+                        "sigma2 > 0, lambda > 0, 0 <= w < 1, max_iter >= 0");
+        goto done;
+    }
+    if (check_buf(&bx, n * d, 8, "em_lowrank", "target") ||
+        check_buf(&bsrc, m * d, 8, "em_lowrank", "source") ||
+        check_buf(&bz, k * m, 8, "em_lowrank", "zt") ||
+        check_buf(&bord, m, 8, "em_lowrank", "order") ||
+        check_buf(&btord, n, 8, "em_lowrank", "target_order") ||
+        check_buf(&bu, k * d, 8, "em_lowrank", "u") ||
+        check_buf(&bmv, m * d, 8, "em_lowrank", "moved"))
+        goto done;
+    /* four iterates, two sets of statistics, the M-step's work */
+    const size_t per_state = (size_t)(k * d + m * d), per_stats = (size_t)(m + n + m * d);
+    const size_t mwork = (size_t)(k * k + d * k + 2 * d * m);
+    mem = (double *)malloc(sizeof(double) * (4 * per_state + 2 * per_stats + mwork));
+    ework = malloc(estep_work_bytes(n, m, d, single));
+    if (!mem || !ework) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    em_state states[4];
+    em_stats stats[2];
+    for (int i = 0; i < 4; ++i) {
+        states[i].u = mem + i * per_state;
+        states[i].mv = states[i].u + k * d;
+    }
+    for (int i = 0; i < 2; ++i) {
+        stats[i].p1 = mem + 4 * per_state + i * per_stats;
+        stats[i].pt1 = stats[i].p1 + m;
+        stats[i].px = stats[i].pt1 + n;
+    }
+    em_problem pb = {(const double *)bx.buf, (const double *)bsrc.buf, (const double *)bz.buf,
+                     n, m, k, d, w, lam, floor_, eps, single, (int64_t *)bord.buf,
+                     (int64_t *)btord.buf, ework, mem + 4 * per_state + 2 * per_stats};
+    Py_ssize_t it = 0;
+    int converged = 0, ok;
+    em_state *fin = NULL;
+    em_stats *fst = NULL;
+    Py_BEGIN_ALLOW_THREADS
+    ok = em_loop(&pb, states, stats, s2_0, tol, max_iter, accelerate, &it, &converged, &fin, &fst);
+    if (ok) {
+        memcpy(bu.buf, fin->u, sizeof(double) * (size_t)(k * d));
+        memcpy(bmv.buf, fin->mv, sizeof(double) * (size_t)(m * d));
+    }
+    Py_END_ALLOW_THREADS
+    if (ok)
+        result = Py_BuildValue("(inidddd)", 1, it, converged, fin->s2, fst->obj, fst->c, fst->np_);
+    else
+        result = Py_BuildValue("(inidddd)", 0, it, 0, 0.0, 0.0, 0.0, 0.0);
+done:
+    free(mem);
+    free(ework);
+    PyBuffer_Release(&bx);
+    PyBuffer_Release(&bsrc);
+    PyBuffer_Release(&bz);
+    PyBuffer_Release(&bord);
+    PyBuffer_Release(&btord);
+    PyBuffer_Release(&bu);
+    PyBuffer_Release(&bmv);
+    return result;
+}
+
 static PyObject *py_label_mass(PyObject *self, PyObject *args) {
     Py_buffer bx, bm, blab, bout;
     Py_ssize_t n, m, d, n_labels, axis = 0;
@@ -831,6 +1095,10 @@ static PyMethodDef methods[] = {
     {"lowrank_mstep", py_lowrank_mstep, METH_VARARGS,
      "lowrank_mstep(zt, m, k, d, p1, px, source, reg, u, moved)"
      " -> (ok, sum PX . moved, sum P1 |moved|^2)"},
+    {"em_lowrank", py_em_lowrank, METH_VARARGS,
+     "em_lowrank(target, source, zt, n, m, k, d, w, lambda, floor, eps, sigma2, single, tol, "
+     "max_iter, accelerate, order, target_order, u, moved) -> (ok, iterations, converged, "
+     "sigma2, objective, c, sum P1)"},
     {"gauss", py_gauss, METH_VARARGS,
      "gauss(a, b, i, j, d, scale, out) -> None: the Gaussian kernel matrix"},
     {"label_mass", py_label_mass, METH_VARARGS,

@@ -320,6 +320,32 @@ def _relative_change(new: float, old: float) -> float:
     return abs(new - old) / max(abs(new), 1e-300)
 
 
+_COMPILED_LOOP = True  # tests switch it off to compare the compiled loop with the Python one
+
+
+def _compiled_loop(
+    tgt_n, src_n, zt_pad, kept, w, lam, floor, sigma2, single, tol, max_iter, accelerate,
+    order, target_order,
+):  # fmt: skip
+    """register_nonrigid's low-rank EM loop in one call of the compiled kernel.
+
+    Returns ``((U, moved, sigma2), c, iterations, converged, objective)`` in normalized
+    units, ``U`` the field's coordinates ``Z' W`` (``kept`` x D); None where an M-step's
+    Cholesky fails (the caller's loop then solves it with checks).
+    """
+    m, d = src_n.shape
+    u = np.empty((zt_pad.shape[0], d))
+    moved = np.empty((m, d))
+    ok, it, converged, sigma2, objective, c, _ = _estep._cestep.em_lowrank(
+        tgt_n, src_n, zt_pad, tgt_n.shape[0], m, zt_pad.shape[0], d, w, lam, floor,
+        _TRUNCATE_EPS, sigma2, single, tol, max_iter, accelerate, order, target_order, u, moved,
+    )  # fmt: skip
+    if not ok:
+        return None
+    # the zero rows of the padded factor give zero rows of U: drop them
+    return (u[:kept], moved, sigma2), c, it, bool(converged), objective
+
+
 # --------------------------------------------------------------------------- public API
 def register_nonrigid(
     source,
@@ -394,7 +420,9 @@ def register_nonrigid(
         may differ from the previous one, so W is not transferred.
     compiled : bool
         Use the compiled E-step and low-rank M-step when built (``False`` forces
-        their NumPy twins).
+        their NumPy twins). With an int ``low_rank`` the whole EM loop runs in one
+        compiled call (the same steps as the Python loop; its sums round differently,
+        about 1e-11 of the coordinates apart).
     accelerate : bool
         Default True: SQUAREM extrapolation of EM (Varadhan & Roland 2008, scheme S3)
         on (W, T, log sigma^2): every second M-step, the last two EM steps give a
@@ -553,73 +581,85 @@ def register_nonrigid(
         work = np.empty_like(g)
         return True
 
-    coef0 = np.zeros((m if z is None else z.shape[1], d))
-    state = (coef0, src_n.copy(), _start_sigma2(tgt_n, src_n, warm_start, unit, floor))
-    stats, objective = e_step(state)
-    converged = False
-    it = 0  # M-steps done
-    step_max = 4.0
-    no_accel = False  # one plain EM step after the switch to the exact kernel
-    while True:
-        if it >= max_iter:
-            break
-        if stats[4] <= 0.0:  # every target point is an outlier: nothing to fit
-            converged = True
-            break
-        prev_state = state
-        new = m_step(stats, state[2])
-        it += 1
-        new_stats, new_obj = e_step(new)
-        done = _relative_change(new_obj, objective) <= tol
-        state, stats, obj_1, objective = new, new_stats, objective, new_obj
-        if done and switch_to_exact():
-            objective, no_accel = np.inf, True  # W is re-solved, tr(W'GW) with it
-            continue
-        if done:
-            converged = True
-            break
-        if not accelerate or no_accel or it + 2 > max_iter or stats[4] <= 0.0:
-            no_accel = False
-            continue
-        # SQUAREM (Varadhan & Roland 2008, scheme S3) on (W, moved, log sigma2): one more
-        # EM step, a steplength from the two differences, one step from the extrapolation;
-        # the extrapolated point is kept only if its objective is no worse.
-        theta0, theta1 = prev_state, state
-        theta2 = m_step(stats, state[2])
-        it += 1
-        r = theta1[1] - theta0[1]
-        v = theta2[1] - theta1[1] - r
-        rr, vv = float(np.sum(r * r)), float(np.sum(v * v))
-        alpha = -np.sqrt(rr / vv) if vv > 0.0 else -1.0
-        alpha = max(min(alpha, -1.0), -step_max)
-        fallback = True
-        if alpha < -1.0:
-            ls = [np.log(t[2]) for t in (theta0, theta1, theta2)]
-            ls2 = ls[0] - 2 * alpha * (ls[1] - ls[0]) + alpha**2 * (ls[2] - 2 * ls[1] + ls[0])
-            ls2 = min(ls2, max(ls) + 5.0)  # no overflow; such a step is rejected anyway
-            ext = tuple(
-                theta0[k]
-                - 2 * alpha * (theta1[k] - theta0[k])
-                + alpha**2 * (theta2[k] - 2 * theta1[k] + theta0[k])
-                for k in (0, 1)
-            ) + (max(float(np.exp(ls2)), floor),)
-            ext_stats, ext_obj = e_step(ext)
-            if np.isfinite(ext_obj) and ext_obj <= objective:
-                fallback = False
-                if alpha <= -step_max:
-                    step_max *= 4.0
-                state, stats, obj_1, objective = ext, ext_stats, objective, ext_obj
-        if fallback:
-            stats, new_obj = e_step(theta2)
-            state, obj_1, objective = theta2, objective, new_obj
-        if _relative_change(objective, obj_1) <= tol:
-            if switch_to_exact():
-                objective, no_accel = np.inf, True
+    s2_start = _start_sigma2(tgt_n, src_n, warm_start, unit, floor)
+    fused = None
+    if zt_pad is not None and polish_trace is None and _COMPILED_LOOP:
+        # The whole loop below in one compiled call (the same steps; its sums round
+        # differently, so the result agrees with this loop's to rounding, not bit for bit).
+        fused = _compiled_loop(
+            tgt_n, src_n, zt_pad, z.shape[1], w, lam, floor, s2_start, single, tol, max_iter,
+            accelerate, order, target_order,
+        )  # fmt: skip
+    if fused is not None:
+        state, c, it, converged, objective = fused
+    else:
+        coef0 = np.zeros((m if z is None else z.shape[1], d))
+        state = (coef0, src_n.copy(), s2_start)
+        stats, objective = e_step(state)
+        converged = False
+        it = 0  # M-steps done
+        step_max = 4.0
+        no_accel = False  # one plain EM step after the switch to the exact kernel
+        while True:
+            if it >= max_iter:
+                break
+            if stats[4] <= 0.0:  # every target point is an outlier: nothing to fit
+                converged = True
+                break
+            prev_state = state
+            new = m_step(stats, state[2])
+            it += 1
+            new_stats, new_obj = e_step(new)
+            done = _relative_change(new_obj, objective) <= tol
+            state, stats, obj_1, objective = new, new_stats, objective, new_obj
+            if done and switch_to_exact():
+                objective, no_accel = np.inf, True  # W is re-solved, tr(W'GW) with it
                 continue
-            converged = True
-            break
+            if done:
+                converged = True
+                break
+            if not accelerate or no_accel or it + 2 > max_iter or stats[4] <= 0.0:
+                no_accel = False
+                continue
+            # SQUAREM (Varadhan & Roland 2008, scheme S3) on (W, moved, log sigma2): one more
+            # EM step, a steplength from the two differences, one step from the extrapolation;
+            # the extrapolated point is kept only if its objective is no worse.
+            theta0, theta1 = prev_state, state
+            theta2 = m_step(stats, state[2])
+            it += 1
+            r = theta1[1] - theta0[1]
+            v = theta2[1] - theta1[1] - r
+            rr, vv = float(np.sum(r * r)), float(np.sum(v * v))
+            alpha = -np.sqrt(rr / vv) if vv > 0.0 else -1.0
+            alpha = max(min(alpha, -1.0), -step_max)
+            fallback = True
+            if alpha < -1.0:
+                ls = [np.log(t[2]) for t in (theta0, theta1, theta2)]
+                ls2 = ls[0] - 2 * alpha * (ls[1] - ls[0]) + alpha**2 * (ls[2] - 2 * ls[1] + ls[0])
+                ls2 = min(ls2, max(ls) + 5.0)  # no overflow; such a step is rejected anyway
+                ext = tuple(
+                    theta0[k]
+                    - 2 * alpha * (theta1[k] - theta0[k])
+                    + alpha**2 * (theta2[k] - 2 * theta1[k] + theta0[k])
+                    for k in (0, 1)
+                ) + (max(float(np.exp(ls2)), floor),)
+                ext_stats, ext_obj = e_step(ext)
+                if np.isfinite(ext_obj) and ext_obj <= objective:
+                    fallback = False
+                    if alpha <= -step_max:
+                        step_max *= 4.0
+                    state, stats, obj_1, objective = ext, ext_stats, objective, ext_obj
+            if fallback:
+                stats, new_obj = e_step(theta2)
+                state, obj_1, objective = theta2, objective, new_obj
+            if _relative_change(objective, obj_1) <= tol:
+                if switch_to_exact():
+                    objective, no_accel = np.inf, True
+                    continue
+                converged = True
+                break
+        c = stats[6]
     wmat, moved, sigma2 = state
-    c = stats[6]
     _finish(converged, name, max_iter, tol)
     landmarks = landmark_coef = None
     if lowrank is not None:  # wmat holds Z' W: the field is G(p, landmarks) proj Z' W
