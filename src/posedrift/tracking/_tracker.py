@@ -694,6 +694,10 @@ class PoseTracker:
                     warm_start=prev,
                     low_rank=self.low_rank,
                     accelerate=True,
+                    # The E-step's kernel values in float32 (its sums in float64): 0.4 ms a
+                    # frame faster. On six clips of 300 frames one point's label changed in
+                    # three frames; elsewhere the joints moved by at most 23 micrometres.
+                    dtype=np.float32,
                 )
         post = res.transfer_labels(labels.astype(np.int64), N_PARTS)
         warp = res.apply
