@@ -3,7 +3,7 @@
 ``posedrift.points._cpoints``).
 
 Metadata lives in ``pyproject.toml``; this file only declares the C extensions (CPD's
-fused E-step in float64 and float32, its low-rank M-step and its label transfer;
+fused E-step in float64 and float32, its low-rank M-step, its EM loop and its label transfer;
 relabelling's k-NN graph and Dijkstra, the forest's per-point descent and its joint votes'
 casting; the grouped mean shift of the part modes and the votes; the segmentation's
 connected components and the downsampling's voxel centroids). They use the plain buffer protocol (no NumPy C API), so NumPy
