@@ -367,6 +367,12 @@ def test_compiled_part_distances_match_the_numpy_path_within_the_reach():
                 assert (got[beyond] > limit[beyond]).all()
                 assert (got[beyond] >= exact[beyond]).all()  # the length of some path
                 assert np.array_equal(np.isinf(got), np.isinf(exact))
+    # Anchors on points: searches that start at 0.
+    on_points = _relabel._part_distances(graph, pts, pts[:15], None)
+    assert (on_points[np.arange(15), np.arange(15)] == 0).all()
+    assert np.array_equal(
+        on_points, _relabel._part_distances(graph, pts, pts[:15], None, compiled=False)
+    )
     # No anchor at all: every part infinitely far.
     none = np.full((15, 3), np.nan)
     assert np.isinf(_relabel._part_distances(graph, pts, none, None)).all()
