@@ -205,9 +205,9 @@ class PoseTracker:
         default); None for the exact kernel. The angle error did not move with it
         beyond the run-to-run spread, from 16 landmarks to the exact kernel on
         synthetic clips and between 24 and 60 on real recordings, while the
-        registration's cost grows with it: about 3.3 ms a frame at 24 landmarks,
-        5.7 at 60 and 25 with the exact kernel, on one AVX2 core (docs/RESULTS.md,
-        "Fewer landmarks").
+        registration's cost grows with it: the registration stage took 2.1-2.6 ms a
+        frame at 24 landmarks, 4.3-4.6 at 60 and 22-28 with the exact kernel, on one
+        AVX2 core (docs/RESULTS.md, speed section).
     alpha : float
         Steepness (1/m) of Algorithm 2's sigmoid.
     height : float, optional
