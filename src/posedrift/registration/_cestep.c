@@ -27,7 +27,7 @@
  *
  * em_lowrank(target, source, zt, n, m, k, d, w, lambda, floor, eps, sigma2, single, tol,
  *            max_iter, accelerate, order, target_order, u, moved)
- *     -> (ok, iterations, converged, sigma2, objective, c, sum P1)
+ *     -> (ok, iterations, converged, sigma2, objective, c)
  *   register_nonrigid's EM loop with a fixed low-rank factor in one call, step for step
  *   as its Python loop (SQUAREM every second M-step, kept only where the objective is no
  *   worse), from U = 0, moved = source and the given sigma2; estep and lowrank_mstep as
@@ -943,9 +943,9 @@ static PyObject *py_em_lowrank(PyObject *self, PyObject *args) {
     }
     Py_END_ALLOW_THREADS
     if (ok)
-        result = Py_BuildValue("(inidddd)", 1, it, converged, fin->s2, fst->obj, fst->c, fst->np_);
+        result = Py_BuildValue("(iniddd)", 1, it, converged, fin->s2, fst->obj, fst->c);
     else
-        result = Py_BuildValue("(inidddd)", 0, it, 0, 0.0, 0.0, 0.0, 0.0);
+        result = Py_BuildValue("(iniddd)", 0, it, 0, 0.0, 0.0, 0.0);
 done:
     free(mem);
     free(ework);
@@ -1098,7 +1098,7 @@ static PyMethodDef methods[] = {
     {"em_lowrank", py_em_lowrank, METH_VARARGS,
      "em_lowrank(target, source, zt, n, m, k, d, w, lambda, floor, eps, sigma2, single, tol, "
      "max_iter, accelerate, order, target_order, u, moved) -> (ok, iterations, converged, "
-     "sigma2, objective, c, sum P1)"},
+     "sigma2, objective, c)"},
     {"gauss", py_gauss, METH_VARARGS,
      "gauss(a, b, i, j, d, scale, out) -> None: the Gaussian kernel matrix"},
     {"label_mass", py_label_mass, METH_VARARGS,
