@@ -31,8 +31,9 @@ for d in 2.0 3.5; do
         | tee "$out/vga_$d.md"
 done
 # Ablations of the tracker.
+ablations=cpd,cpd-paper,icp-paper,cpd-norelabel,cpd-novotes,cpd-rigid,cpd-cold,cpd-reinit
 posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 \
-    --methods cpd,cpd-paper,icp-paper,cpd-norelabel,cpd-novotes,cpd-rigid,cpd-cold,cpd-200,cpd-800 \
+    --methods "$ablations,cpd-200,cpd-800" \
     --json "$out/ablations.json" --no-paper | tee "$out/ablations.md"
 # Drift (first / last 100 frames per sequence in the JSON), and the time of a full
 # 500-frame, four-method run.

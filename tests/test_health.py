@@ -8,7 +8,14 @@ import pytest
 
 from posedrift.skeleton._definitions import JOINT_INDEX, PART_JOINTS, PART_NAMES
 from posedrift.skeleton._tpose import t_pose_joints
-from posedrift.tracking._health import _PART_REACH, Health, _joint_gaps, assess, bone_distances
+from posedrift.tracking._health import (
+    _PART_REACH,
+    Health,
+    _joint_gaps,
+    assess,
+    bone_distances,
+    unexplained_share,
+)
 from posedrift.tracking._init import label_template_points, smooth_labels
 
 _J = JOINT_INDEX
@@ -237,3 +244,20 @@ def test_joint_gaps_match_the_original_expression():
         joints = rng.normal(size=(8, 3))
         ref = np.sqrt(((joints[:, None, :] - points[None, :, :]) ** 2).sum(-1).min(axis=1))
         _assert_same(_joint_gaps(points, joints), ref)
+
+
+def test_unexplained_share_counts_points_far_from_their_bone():
+    rng = np.random.default_rng(5)
+    points, labels, joints = _body(rng)
+    # Identity: points on their own part's bone are all explained, even with no slack.
+    starts, ends = _ref_segments(joints)
+    on_bones = starts[labels] + rng.random((len(labels), 1)) * (ends - starts)[labels]
+    assert unexplained_share(on_bones, labels, joints, height=1.75, slack=0.0) == 0.0
+    # A metre away from the body every point is unexplained; with no points, all are.
+    assert unexplained_share(on_bones + [1.0, 0.0, 0.0], labels, joints, height=1.75) == 1.0
+    assert unexplained_share(points[:0], labels[:0], joints, height=1.75) == 1.0
+    # Unknown labels count as far; the health check reports the same share.
+    labels[:40] = -1
+    share = unexplained_share(points, labels, joints, height=1.8)
+    health = assess(points, labels, joints, np.ones(15, bool), height=1.8, max_unexplained=1.0)
+    assert share == health.unexplained and share >= 40 / len(points)

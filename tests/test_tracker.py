@@ -498,3 +498,42 @@ def test_carried_joints_follow_the_field_near_the_points_and_the_body_away():
     # Where the field gives nothing, the rigid motion.
     nan_field = lambda p: np.full_like(p, np.nan)  # noqa: E731
     np.testing.assert_allclose(_carry_joints(joints, source, moved, nan_field), rigid, atol=1e-9)
+
+
+def test_a_failed_track_is_kept_where_it_explains_the_forest_better():
+    from posedrift.skeleton import t_pose_joints
+    from posedrift.skeleton._fit import SkeletonFit
+    from posedrift.tracking._health import Health, _segments
+    from posedrift.tracking._tracker import _Attempt
+
+    rng = np.random.default_rng(0)
+    truth = t_pose_joints(1.75) + [0.0, 0.0, 2.5]
+    labels = rng.integers(0, 15, size=400)
+    starts, ends = _segments(truth)
+    points = starts[labels] + rng.random((400, 1)) * (ends - starts)[labels]
+    forest = np.full((400, 15), 0.01)  # the forest labels every point right
+    forest[np.arange(400), labels] = 0.86
+    hanging = truth.copy()  # the right arm hanging where it is held out
+    shoulder = truth[JOINT_INDEX["right_shoulder"]]
+    for name, drop in (("right_elbow", 0.3), ("right_hand", 0.55)):
+        hanging[JOINT_INDEX[name]] = shoulder - [0.0, drop, 0.0]
+
+    def attempt(joints, ok, score):
+        fit = SkeletonFit(joints, np.ones(15), np.ones(15, bool), np.full(15, np.nan))
+        return _Attempt(labels=labels, fit=fit, health=Health(ok, "", score, 0.0, 1.0))
+
+    tracker = PoseTracker(K)
+    tracker._calibration = SimpleNamespace(height=1.75)
+    failed_right, fresh_wrong = attempt(truth, False, 0.6), attempt(hanging, True, 0.1)
+    # The failed track explains the forest's labels better: kept.
+    assert not tracker._replaces_track(fresh_wrong, failed_right, points, forest)
+    # A fresh start that explains them better replaces a failed track; so does any
+    # fresh start when there is no track, no forest evidence, or the option is off.
+    failed_wrong, fresh_right = attempt(hanging, False, 0.6), attempt(truth, True, 0.1)
+    assert tracker._replaces_track(fresh_right, failed_wrong, points, forest)
+    assert tracker._replaces_track(fresh_wrong, None, points, forest)
+    assert tracker._replaces_track(fresh_wrong, failed_right, points, None)
+    tracker.keep_better_track = False
+    assert tracker._replaces_track(fresh_wrong, failed_right, points, forest)
+    # Without the forest's say, an unhealthy fresh start replaces only a worse-scoring track.
+    assert not tracker._replaces_track(attempt(hanging, False, 0.7), failed_right, points, None)

@@ -12,7 +12,8 @@ from posedrift.cli._app import eval_app, fail, progress_enabled
 _METHODS_HELP = (
     "Comma-separated methods: cpd, shotton, pda, icp, and the ablations cpd-paper, "
     "icp-paper (the paper's pure tracking, no per-frame forest evidence), cpd-norelabel, "
-    "cpd-novotes (no joint votes), cpd-rigid, cpd-cold, cpd-200, cpd-400, cpd-800, cpd-fullres."
+    "cpd-novotes (no joint votes), cpd-rigid, cpd-cold, cpd-reinit (a failed track always "
+    "re-initialized), cpd-200, cpd-400, cpd-800, cpd-fullres."
 )
 
 

@@ -91,6 +91,10 @@ METHODS: dict[str, tuple[str, MethodFactory]] = {
     ),
     "cpd-rigid": ("ablation: rigid instead of nonrigid CPD", _tracker(registration="rigid")),
     "cpd-cold": ("ablation: no warm start of CPD", _tracker(warm_start=False)),
+    "cpd-reinit": (
+        "ablation: a failed track always replaced by a healthy re-initialization",
+        _tracker(keep_better_track=False),
+    ),
     "cpd-200": ("ablation: 200 points", _tracker(n_points=200)),
     "cpd-400": ("ablation: 400 points (the default)", _tracker(n_points=400)),
     "cpd-800": ("ablation: 800 points", _tracker(n_points=800)),

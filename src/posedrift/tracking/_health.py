@@ -99,6 +99,27 @@ _PART_REACH = np.array(
 )
 
 
+def unexplained_share(
+    points: np.ndarray,
+    labels: np.ndarray,
+    joints: np.ndarray,
+    *,
+    height: float,
+    slack: float = 0.06,
+) -> float:
+    """Share of the points farther from their own part's bone than its reach plus ``slack``.
+
+    The reach is each part's expected surface distance from its bone, scaled by
+    ``height`` (metres); points with unknown distances count as far. 1.0 for no points.
+    """
+    dist = bone_distances(points, labels, joints)
+    lab = np.asarray(labels).astype(np.int64)
+    reach = _PART_REACH * (height / 1.75)
+    limit = np.where((lab >= 0) & (lab < len(reach)), reach[np.clip(lab, 0, 14)] + slack, 0.0)
+    bad = ~np.isfinite(dist) | (dist > limit)
+    return float(np.mean(bad)) if len(bad) else 1.0
+
+
 def assess(
     points: np.ndarray,
     labels: np.ndarray,
@@ -147,12 +168,7 @@ def assess(
     meas = float(np.mean(measured))
     if not np.isfinite(joints).all():
         return Health(False, "the skeleton has unknown joints", np.inf, 1.0, meas)
-    dist = bone_distances(points, labels, joints)
-    lab = np.asarray(labels).astype(np.int64)
-    reach = _PART_REACH * (height / 1.75)
-    limit = np.where((lab >= 0) & (lab < len(reach)), reach[np.clip(lab, 0, 14)] + slack, 0.0)
-    bad = ~np.isfinite(dist) | (dist > limit)
-    unexplained = float(np.mean(bad)) if len(bad) else 1.0
+    unexplained = unexplained_share(points, labels, joints, height=height, slack=slack)
     score = unexplained + 0.5 * (1.0 - meas)
     if sigma is not None and np.isfinite(sigma):
         score += max(0.0, sigma - 0.02)

@@ -37,7 +37,7 @@ from posedrift.skeleton._fit import (
     refine_with_votes,
 )
 from posedrift.skeleton._meanshift import part_modes
-from posedrift.tracking._health import Health, assess
+from posedrift.tracking._health import Health, assess, unexplained_share
 from posedrift.tracking._init import (
     Calibration,
     LimbLengths,
@@ -254,6 +254,15 @@ class PoseTracker:
         Frames, from the calibration on, over which the limb bones are measured:
         each is the median of its lengths in those frames
         (:class:`posedrift.tracking._init.LimbLengths`). 1 keeps the first frame's.
+    keep_better_track : bool
+        When the track fails its health check, keep it (status tracked, reported as
+        doubtful) rather than take the fresh initialization where its skeleton
+        explains the forest's per-point labels of the frame better (a smaller share of
+        points far from their part's bone; beyond the paper). The health score
+        itself favours a fresh start, whose labels are cleaned with its own skeleton.
+        False: a fresh initialization replaces the failed track whenever it is
+        healthy or scores lower. Needs the forest's per-point probabilities (see
+        ``appearance_weight``).
     rng : int or Generator
         Seeds downsampling and RANSAC (runs are repeatable for an int).
 
@@ -301,6 +310,7 @@ class PoseTracker:
         vote_weights: tuple[float, float] = (0.5, 0.4),
         vote_bandwidth: float = 0.05,
         calibration_frames: int = 30,
+        keep_better_track: bool = True,
         rng: int | np.random.Generator | None = 0,
     ) -> None:
         caller = "PoseTracker"
@@ -385,6 +395,7 @@ class PoseTracker:
             integer=True,
             caller=caller,
         )
+        self.keep_better_track = bool(keep_better_track)
         self._frame_votes: tuple[np.ndarray, ...] | None = None
         self.relabel = bool(relabel)
         self.registration = registration
@@ -524,9 +535,7 @@ class PoseTracker:
             t3 = time.perf_counter()
             fresh = self._initialize(depth, intr, mask, full, pixels, points, graph)
             timings["initialize"] = 1e3 * (time.perf_counter() - t3)
-            if fresh is not None and (
-                fresh.health.ok or attempt is None or fresh.health.score < attempt.health.score
-            ):
+            if fresh is not None and self._replaces_track(fresh, attempt, points, appearance):
                 attempt = fresh
                 status = FrameStatus.REINITIALIZED
             usable = attempt is not None and np.isfinite(attempt.fit.joints).all()
@@ -573,6 +582,24 @@ class PoseTracker:
             timings_ms=timings,
             message=message,
         )
+
+    def _replaces_track(self, fresh: _Attempt, track: _Attempt | None, points, appearance) -> bool:
+        """Whether a fresh initialization replaces the track that failed its health check."""
+        if track is None:
+            return True
+        if (
+            self.keep_better_track
+            and appearance is not None
+            and np.isfinite(track.fit.joints).all()
+            and np.isfinite(fresh.fit.joints).all()
+        ):
+            # Judged by the forest's labels, which neither skeleton was fitted to.
+            forest_labels = np.argmax(appearance, axis=1)
+            height = self._calibration.height
+            kept = unexplained_share(points, forest_labels, track.fit.joints, height=height)
+            if kept < unexplained_share(points, forest_labels, fresh.fit.joints, height=height):
+                return False
+        return fresh.health.ok or fresh.health.score < track.health.score
 
     def _measure_limbs(self, points, labels, graph) -> None:
         """Measure the limb bones in this frame while the calibration is recent."""
