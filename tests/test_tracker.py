@@ -513,10 +513,10 @@ def test_a_failed_track_is_kept_where_it_explains_the_forest_better():
     points = starts[labels] + rng.random((400, 1)) * (ends - starts)[labels]
     forest = np.full((400, 15), 0.01)  # the forest labels every point right
     forest[np.arange(400), labels] = 0.86
-    hanging = truth.copy()  # the right arm hanging where it is held out
+    wrong_arm = truth.copy()  # the right arm along the trunk where it is held out
     shoulder = truth[JOINT_INDEX["right_shoulder"]]
-    for name, drop in (("right_elbow", 0.3), ("right_hand", 0.55)):
-        hanging[JOINT_INDEX[name]] = shoulder - [0.0, drop, 0.0]
+    for name, along in (("right_elbow", 0.3), ("right_hand", 0.55)):
+        wrong_arm[JOINT_INDEX[name]] = shoulder - [0.0, along, 0.0]
 
     def attempt(joints, ok, score):
         fit = SkeletonFit(joints, np.ones(15), np.ones(15, bool), np.full(15, np.nan))
@@ -524,16 +524,16 @@ def test_a_failed_track_is_kept_where_it_explains_the_forest_better():
 
     tracker = PoseTracker(K)
     tracker._calibration = SimpleNamespace(height=1.75)
-    failed_right, fresh_wrong = attempt(truth, False, 0.6), attempt(hanging, True, 0.1)
+    failed_right, fresh_wrong = attempt(truth, False, 0.6), attempt(wrong_arm, True, 0.1)
     # The failed track explains the forest's labels better: kept.
     assert not tracker._replaces_track(fresh_wrong, failed_right, points, forest)
     # A fresh start that explains them better replaces a failed track; so does any
     # fresh start when there is no track, no forest evidence, or the option is off.
-    failed_wrong, fresh_right = attempt(hanging, False, 0.6), attempt(truth, True, 0.1)
+    failed_wrong, fresh_right = attempt(wrong_arm, False, 0.6), attempt(truth, True, 0.1)
     assert tracker._replaces_track(fresh_right, failed_wrong, points, forest)
     assert tracker._replaces_track(fresh_wrong, None, points, forest)
     assert tracker._replaces_track(fresh_wrong, failed_right, points, None)
     tracker.keep_better_track = False
     assert tracker._replaces_track(fresh_wrong, failed_right, points, forest)
     # Without the forest's say, an unhealthy fresh start replaces only a worse-scoring track.
-    assert not tracker._replaces_track(attempt(hanging, False, 0.7), failed_right, points, None)
+    assert not tracker._replaces_track(attempt(wrong_arm, False, 0.7), failed_right, points, None)
