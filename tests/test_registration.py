@@ -418,12 +418,17 @@ _REGISTERS = [
 
 def _in_metres_and_millimetres(register, source, target, options):
     """Both runs (metres, millimetres): the same to a nanometre (0.1 um for the fast
-    nonrigid defaults, as in test_scaling_with_the_default_fast_path), same iterations."""
+    nonrigid defaults, as in test_scaling_with_the_default_fast_path; 10 nm for the exact
+    nonrigid solve, whose rounding depends on the BLAS kernels: OpenBLAS's SkylakeX ones,
+    picked on Intel AVX-512 processors, put a body shrunk onto one point 1.08 nm apart in
+    the two units, its Haswell ones 0.67 nm), same iterations."""
     m = register(source, target, **options)
     mm = register(source * 1000, target * 1000, **options)
     assert mm.iterations == m.iterations and mm.converged == m.converged
-    fast = register is register_nonrigid and options.get("low_rank", "auto") == "auto"
-    np.testing.assert_allclose(mm.moved / 1000, m.moved, rtol=0, atol=1e-7 if fast else 1e-9)
+    nonrigid = register is register_nonrigid
+    fast = nonrigid and options.get("low_rank", "auto") == "auto"
+    atol = 1e-7 if fast else 1e-8 if nonrigid else 1e-9
+    np.testing.assert_allclose(mm.moved / 1000, m.moved, rtol=0, atol=atol)
     assert mm.sigma2 / 1e6 == pytest.approx(m.sigma2, rel=1e-6)
     if m.matrix is not None:
         np.testing.assert_allclose(mm.matrix, m.matrix, rtol=0, atol=1e-9)
