@@ -102,3 +102,22 @@ def test_bad_arguments_are_named(kwargs, match):
     depth, pixels, offsets = args.pop("depth"), args.pop("pixels"), args.pop("offsets")
     with pytest.raises(ValueError, match=match):
         depth_features(depth, pixels, offsets, intrinsics=CAM, **args)
+
+
+def test_compiled_feature_matrix_equals_the_numpy_loop_bitwise():
+    from posedrift.labelling import _features
+
+    if _features._ckernels is None:
+        pytest.skip("the compiled kernels (posedrift.labelling._ckernels) are not built")
+    rng = np.random.default_rng(4)
+    depth = rng.uniform(1.5, 4.0, size=(40, 50)).astype(np.float32)
+    depth[rng.uniform(size=depth.shape) < 0.05] = 0.0  # holes
+    mask = (rng.uniform(size=depth.shape) < 0.8) & (depth > 0)
+    cam = Intrinsics(fx=90.0, fy=95.0, cx=25.0, cy=20.0, width=50, height=40)
+    pixels = np.argwhere(mask)[:500]
+    offsets = rng.uniform(-400, 400, size=(300, 4)).astype(np.float32)  # many off the image
+    options = {"reference_focal": 285.63, "background": 10.0}
+    compiled = _features.feature_matrix(depth, mask, pixels, offsets, cam, **options)
+    loop = _features.feature_matrix(depth, mask, pixels, offsets, cam, compiled=False, **options)
+    np.testing.assert_array_equal(compiled, loop)
+    assert np.any(compiled > 5.0) and np.any(compiled < -5.0)  # background probes both ways

@@ -13,6 +13,12 @@
  *   The same float32 operations in the same order as features.probe (no contraction into
  *   fused multiply-adds), so the same leaves as the NumPy descent.
  *
+ * features(offsets, image, rows, cols, row_scale, col_scale, height, width, out)
+ *   Every offset pair at every pixel (features.feature_matrix, the body-part net's input).
+ *   offsets : (K, 4) float32 (u_row, u_col, v_row, v_col); image, rows, ...: as descend's
+ *   out     : (N, K) float32, written: probe(u) - probe(v), the same float32 operations in
+ *             the same order as features.probe, so the same values as the NumPy twin.
+ *
  * cast(points, leaves, joint, offset, weight, wanted, where, joint_out, weight_out) -> M
  *   Every pixel's joint votes (JointVotes.cast), in the same order: tree, pixel, vote.
  *   points  : (N, 3) float64; leaves: (T, N) int32 leaf rows, -1 for none
@@ -260,6 +266,73 @@ static PyObject *descend(PyObject *self, PyObject *args) {
         PyErr_SetString(PyExc_ValueError, "descend: a child index is out of range");
         return NULL;
     }
+    Py_RETURN_NONE;
+}
+
+static PyObject *features(PyObject *self, PyObject *args) {
+    (void)self;
+    PyObject *objs[7];
+    Py_ssize_t height, width;
+    if (!PyArg_ParseTuple(args, "OOOOOOnnO", &objs[0], &objs[1], &objs[2], &objs[3], &objs[4],
+                          &objs[5], &height, &width, &objs[6]))
+        return NULL;
+    Py_buffer b[7];
+    int got = 0;
+    for (; got < 7; got++) {
+        int flags = PyBUF_C_CONTIGUOUS | (got == 6 ? PyBUF_WRITABLE : 0);
+        if (PyObject_GetBuffer(objs[got], &b[got], flags) < 0) break;
+        if (b[got].itemsize != 4) {
+            PyBuffer_Release(&b[got]);
+            PyErr_SetString(PyExc_ValueError, "features: every buffer must hold 32-bit items");
+            break;
+        }
+    }
+    if (got < 7) {
+        for (int i = 0; i < got; i++) PyBuffer_Release(&b[i]);
+        return NULL;
+    }
+    const Py_ssize_t k = b[0].len / 16;
+    const Py_ssize_t n = b[2].len / 4;
+    const float *offsets = (const float *)b[0].buf;
+    const float *image = (const float *)b[1].buf;
+    const float *rows = (const float *)b[2].buf, *cols = (const float *)b[3].buf;
+    const float *row_scale = (const float *)b[4].buf, *col_scale = (const float *)b[5].buf;
+    float *out = (float *)b[6].buf;
+    int ok = b[0].len % 16 == 0 && b[3].len / 4 == n && b[4].len / 4 == n &&
+             b[5].len / 4 == n && b[6].len / 4 == n * k && height >= 0 && width >= 0 &&
+             (height + 2) * (width + 2) <= b[1].len / 4;
+    if (!ok) {
+        for (int i = 0; i < 7; i++) PyBuffer_Release(&b[i]);
+        PyErr_SetString(PyExc_ValueError, "features: inconsistent buffers");
+        return NULL;
+    }
+    const float top_row = (float)(height + 1), top_col = (float)(width + 1);
+    const int32_t stride = (int32_t)(width + 2);
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        const float r0 = rows[i], c0 = cols[i], rs = row_scale[i], cs = col_scale[i];
+        float *row_out = out + i * k;
+        for (Py_ssize_t j = 0; j < k; j++) {
+            const float *val = offsets + 4 * j;
+            float r, c;
+            r = val[0] * rs;
+            r = r + r0;
+            r = r < 0.0f ? 0.0f : (r > top_row ? top_row : r);
+            c = val[1] * cs;
+            c = c + c0;
+            c = c < 0.0f ? 0.0f : (c > top_col ? top_col : c);
+            const float first = image[(int32_t)r * stride + (int32_t)c];
+            r = val[2] * rs;
+            r = r + r0;
+            r = r < 0.0f ? 0.0f : (r > top_row ? top_row : r);
+            c = val[3] * cs;
+            c = c + c0;
+            c = c < 0.0f ? 0.0f : (c > top_col ? top_col : c);
+            row_out[j] = first - image[(int32_t)r * stride + (int32_t)c];
+        }
+    }
+    Py_END_ALLOW_THREADS
+    for (int i = 0; i < 7; i++) PyBuffer_Release(&b[i]);
     Py_RETURN_NONE;
 }
 
@@ -773,6 +846,9 @@ static PyMethodDef methods[] = {
     {"descend", descend, METH_VARARGS,
      "descend(table, image, rows, cols, row_scale, col_scale, roots, levels, height, width, "
      "out): the forest's descent."},
+    {"features", features, METH_VARARGS,
+     "features(offsets, image, rows, cols, row_scale, col_scale, height, width, out): every "
+     "offset pair's feature at every pixel."},
     {"cast", cast, METH_VARARGS,
      "cast(points, leaves, joint, offset, weight, wanted, where, joint_out, weight_out) -> M: "
      "the joint votes."},

@@ -23,6 +23,11 @@ import numpy as np
 
 from posedrift.camera import Intrinsics
 
+try:  # the compiled kernels are optional: built by ``pip install -e .`` when a compiler exists
+    from posedrift.labelling import _ckernels  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the build
+    _ckernels = None
+
 REFERENCE_FOCAL = 285.63
 """Focal length (pixels) at which offsets are expressed: Kinect v1 depth at 320 x 240."""
 
@@ -52,6 +57,75 @@ def probe_image(depth: np.ndarray, mask: np.ndarray, background: float) -> np.nd
     inner = padded[1:-1, 1:-1]
     np.copyto(inner, depth, where=mask, casting="unsafe")
     return padded.ravel()
+
+
+def checked_frame(
+    depth: np.ndarray, mask: np.ndarray | None, intrinsics: Intrinsics, caller: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """A labeller's frame checked once: ``(depth as float32, foreground)``.
+
+    The foreground is the pixels with finite, positive depth, within ``mask`` where
+    one is given. Messages name ``caller`` (``"BodyPartForest.predict"``).
+
+    Raises
+    ------
+    ValueError
+        If ``intrinsics`` is not an :class:`Intrinsics`, ``depth`` is not a numeric
+        image of its shape, or ``mask`` has another shape.
+    """
+    depth = np.asarray(depth)
+    if not isinstance(intrinsics, Intrinsics):
+        raise ValueError(
+            f"The 'intrinsics' argument of {caller} must be an Intrinsics. "
+            f"Got {type(intrinsics).__name__} instead."
+        )
+    if depth.ndim != 2 or depth.shape != intrinsics.shape:
+        raise ValueError(
+            f"The 'depth' argument of {caller} must be an image of shape "
+            f"{intrinsics.shape} (the intrinsics'). Got shape {depth.shape} instead."
+        )
+    if not np.issubdtype(depth.dtype, np.number):
+        raise ValueError(
+            f"The 'depth' argument of {caller} must hold numbers. Got dtype {depth.dtype} instead."
+        )
+    depth = depth.astype(np.float32, copy=False)
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(depth) & (depth > 0)
+    if mask is not None:
+        mask = np.asarray(mask)
+        if mask.shape != depth.shape:
+            raise ValueError(
+                f"The 'mask' argument of {caller} must have the depth's shape "
+                f"{depth.shape}. Got shape {mask.shape} instead."
+            )
+        valid &= mask.astype(bool, copy=False)
+    return depth, valid
+
+
+def checked_pixels(pixels: np.ndarray, shape: tuple[int, int], caller: str) -> np.ndarray:
+    """``(N, 2)`` integer ``(row, column)`` pixels inside an image of ``shape``, as intp.
+
+    Raises
+    ------
+    ValueError
+        If ``pixels`` is not an (N, 2) integer array or a pixel lies outside the image.
+    """
+    pixels = np.asarray(pixels)
+    if pixels.ndim != 2 or pixels.shape[1] != 2 or not np.issubdtype(pixels.dtype, np.integer):
+        raise ValueError(
+            f"The 'pixels' argument of {caller} must be an (N, 2) integer array of "
+            f"(row, column). Got dtype {pixels.dtype}, shape {pixels.shape} instead."
+        )
+    height, width = shape
+    if len(pixels) and (
+        pixels.min() < 0 or pixels[:, 0].max() >= height or pixels[:, 1].max() >= width
+    ):
+        raise ValueError(
+            f"The 'pixels' argument of {caller} must lie inside the {height} x {width} "
+            f"image. Got rows {pixels[:, 0].min()}..{pixels[:, 0].max()}, columns "
+            f"{pixels[:, 1].min()}..{pixels[:, 1].max()}."
+        )
+    return pixels.astype(np.intp, copy=False)
 
 
 def pixel_terms(
@@ -160,17 +234,25 @@ def feature_matrix(
     background: float,
     out: np.ndarray | None = None,
     chunk: int = 256,
+    compiled: bool = True,
 ) -> np.ndarray:
     """Every offset pair at every listed pixel: the ``(N, K)`` float32 training matrix.
 
     Inputs are assumed valid (see :func:`depth_features` for the checked entry point).
+    With ``compiled`` (and the kernels built) one compiled loop computes it, about ten
+    times faster at a few hundred pixels, with the same float32 operations: the same
+    values as the NumPy loop (``compiled=False``), which reads ``chunk`` offsets at a time.
     """
     image = probe_image(depth, mask, background)
-    rows, cols, row_scale, col_scale = pixel_terms(depth, pixels, intrinsics, reference_focal)
-    offsets = np.asarray(offsets, dtype=np.float32)
+    terms = pixel_terms(depth, pixels, intrinsics, reference_focal)
+    offsets = np.ascontiguousarray(offsets, dtype=np.float32)
     n, k = len(pixels), len(offsets)
     if out is None:
         out = np.empty((n, k), dtype=np.float32)
+    if compiled and _ckernels is not None and out.flags.c_contiguous and out.dtype == np.float32:
+        _ckernels.features(offsets, image, *terms, depth.shape[0], depth.shape[1], out)
+        return out
+    rows, cols, row_scale, col_scale = terms
     for start in range(0, k, chunk):
         block = offsets[start : start + chunk]
         out[:, start : start + len(block)] = pair_features(

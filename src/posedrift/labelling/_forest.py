@@ -25,6 +25,8 @@ from posedrift.camera import Intrinsics
 from posedrift.labelling._features import (
     BACKGROUND_DEPTH,
     REFERENCE_FOCAL,
+    checked_frame,
+    checked_pixels,
     pixel_terms,
     probe,
     probe_image,
@@ -482,33 +484,7 @@ class BodyPartForest:
         >>> pred.labels.shape, pred.probabilities.shape
         ((240, 320), (0, 15))
         """
-        depth = np.asarray(depth)
-        if not isinstance(intrinsics, Intrinsics):
-            raise ValueError(
-                f"The 'intrinsics' argument of BodyPartForest.predict must be an Intrinsics. "
-                f"Got {type(intrinsics).__name__} instead."
-            )
-        if depth.ndim != 2 or depth.shape != intrinsics.shape:
-            raise ValueError(
-                f"The 'depth' argument of BodyPartForest.predict must be an image of shape "
-                f"{intrinsics.shape} (the intrinsics'). Got shape {depth.shape} instead."
-            )
-        if not np.issubdtype(depth.dtype, np.number):
-            raise ValueError(
-                f"The 'depth' argument of BodyPartForest.predict must hold numbers. "
-                f"Got dtype {depth.dtype} instead."
-            )
-        depth = depth.astype(np.float32, copy=False)
-        with np.errstate(invalid="ignore"):
-            valid = np.isfinite(depth) & (depth > 0)
-        if mask is not None:
-            mask = np.asarray(mask)
-            if mask.shape != depth.shape:
-                raise ValueError(
-                    f"The 'mask' argument of BodyPartForest.predict must have the depth's "
-                    f"shape {depth.shape}. Got shape {mask.shape} instead."
-                )
-            valid &= mask.astype(bool, copy=False)
+        depth, valid = checked_frame(depth, mask, intrinsics, "BodyPartForest.predict")
         flat = np.flatnonzero(valid)
         rows, cols = np.divmod(flat, depth.shape[1])
         pixels = np.column_stack([rows, cols]).astype(np.intp)
@@ -572,44 +548,8 @@ class BodyPartForest:
         (2, 15)
         """
         caller = "BodyPartForest.predict_pixels"
-        depth = np.asarray(depth)
-        if not isinstance(intrinsics, Intrinsics):
-            raise ValueError(
-                f"The 'intrinsics' argument of {caller} must be an Intrinsics. "
-                f"Got {type(intrinsics).__name__} instead."
-            )
-        if depth.ndim != 2 or depth.shape != intrinsics.shape:
-            raise ValueError(
-                f"The 'depth' argument of {caller} must be an image of shape "
-                f"{intrinsics.shape} (the intrinsics'). Got shape {depth.shape} instead."
-            )
-        pixels = np.asarray(pixels)
-        if pixels.ndim != 2 or pixels.shape[1] != 2 or not np.issubdtype(pixels.dtype, np.integer):
-            raise ValueError(
-                f"The 'pixels' argument of {caller} must be an (N, 2) integer array of "
-                f"(row, column). Got dtype {pixels.dtype}, shape {pixels.shape} instead."
-            )
-        height, width = depth.shape
-        if len(pixels) and (
-            pixels.min() < 0 or pixels[:, 0].max() >= height or pixels[:, 1].max() >= width
-        ):
-            raise ValueError(
-                f"The 'pixels' argument of {caller} must lie inside the {height} x {width} "
-                f"image. Got rows {pixels[:, 0].min()}..{pixels[:, 0].max()}, columns "
-                f"{pixels[:, 1].min()}..{pixels[:, 1].max()}."
-            )
-        depth = depth.astype(np.float32, copy=False)
-        with np.errstate(invalid="ignore"):
-            valid = np.isfinite(depth) & (depth > 0)
-        if mask is not None:
-            mask = np.asarray(mask)
-            if mask.shape != depth.shape:
-                raise ValueError(
-                    f"The 'mask' argument of {caller} must have the depth's shape "
-                    f"{depth.shape}. Got shape {mask.shape} instead."
-                )
-            valid &= mask.astype(bool, copy=False)
-        pixels = pixels.astype(np.intp, copy=False)
+        depth, valid = checked_frame(depth, mask, intrinsics, caller)
+        pixels = checked_pixels(pixels, depth.shape, caller)
         out = np.full((len(pixels), self.n_parts), 1.0 / self.n_parts, dtype=np.float32)
         leaves = np.full((self.n_trees, len(pixels)), -1, dtype=np.int32)
         inside = valid[pixels[:, 0], pixels[:, 1]] if len(pixels) else np.zeros(0, bool)
