@@ -1,4 +1,4 @@
-"""``posedrift eval labels``: per-pixel accuracy of the body-part forest on a synth folder."""
+"""``posedrift eval labels``: per-pixel accuracy of the forest or the net on a synth folder."""
 
 from __future__ import annotations
 
@@ -17,8 +17,12 @@ def eval_labels(
     ],
     json_out: Annotated[Path, typer.Option("--json", help="Where to write the JSON result.")],
     model: Annotated[
-        Path | None, typer.Option("--model", help="Forest model file (default: shipped model).")
+        Path | None,
+        typer.Option("--model", help="Model file of the --classifier (default: shipped model)."),
     ] = None,
+    classifier: Annotated[
+        str, typer.Option("--classifier", help="forest (the body-part forest) or net.")
+    ] = "forest",
     png: Annotated[
         Path | None,
         typer.Option("--png", help="Picture of a few frames (default: beside the JSON)."),
@@ -27,7 +31,7 @@ def eval_labels(
         int | None, typer.Option("--frames", min=1, help="Evaluate only the first N frames.")
     ] = None,
 ) -> None:
-    """Label every frame of a synth folder with the forest and compare with the truth.
+    """Label every frame of a synth folder with the forest (or net) and compare with the truth.
 
     Writes {"pixel_accuracy", "per_part", "frames", "ms_per_frame", "by_distance",
     "skipped"} to the JSON and a PNG of a few frames (depth | truth | prediction).
@@ -39,15 +43,19 @@ def eval_labels(
     import json
 
     from posedrift.cli._outputs import check_output_file
-    from posedrift.labelling import BodyPartForest
+    from posedrift.labelling import BodyPartForest, BodyPartNet
     from posedrift.labelling._train import evaluate_label_folder
 
     check_output_file(json_out, "--json")
     if png is None:
         png = json_out.with_suffix(".png")
     check_output_file(png, "--png")
+    kinds = {"forest": BodyPartForest, "net": BodyPartNet}
+    if classifier not in kinds:
+        raise fail(f"--classifier must be 'forest' or 'net'. Got {classifier!r}.")
+    kind = kinds[classifier]
     try:
-        forest = BodyPartForest.load(model) if model is not None else BodyPartForest.load_default()
+        forest = kind.load(model) if model is not None else kind.load_default()
     except ValueError as exc:
         raise fail(str(exc)) from exc
 

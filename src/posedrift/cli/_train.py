@@ -1,4 +1,4 @@
-"""``posedrift train``: fit the body-part forest on freshly rendered synthetic frames."""
+"""``posedrift train``: fit the body-part forest (or net) on freshly rendered synthetic frames."""
 
 from __future__ import annotations
 
@@ -19,6 +19,14 @@ def _default_mocap() -> Path | None:
 @app.command("train")
 def train(
     out: Annotated[Path, typer.Option("--out", help="Where to write the model (.npz).")],
+    classifier: Annotated[
+        str,
+        typer.Option(
+            "--classifier",
+            help="forest: the body-part forest (labels and joint votes; Shotton et al.); "
+            "net: the body-part net (a perceptron over the same kind of depth features).",
+        ),
+    ] = "forest",
     frames: Annotated[
         int, typer.Option("--frames", min=1, help="Rendered training frames.")
     ] = 2000,
@@ -105,18 +113,28 @@ def train(
             help="A pixel votes only for joints within this many metres of it.",
         ),
     ] = 0.2,
+    hidden: Annotated[
+        str,
+        typer.Option("--hidden", help="Net only: widths of the hidden layers, comma-separated."),
+    ] = "512,256,128",
+    epochs: Annotated[
+        int, typer.Option("--epochs", min=1, help="Net only: passes over the sampled pixels.")
+    ] = 8,
 ) -> None:
-    """Train a body-part forest on rendered synthetic depth frames (needs scikit-learn).
+    """Train a body-part forest (needs scikit-learn) or net on rendered depth frames.
 
     Poses come from the BVH clips (all but the held-out ones; near-duplicate poses
     dropped, --min-pose-distance) and the procedural motion, bodies of varied height,
     girth and build, views within 45 degrees of frontal at 2-3.5 m and (--wide-share
     of the frames) wider views up to --wide-yaw degrees from frontal at 1-4.5 m,
-    Kinect-like noise on half of the frames. Then, on --vote-frames fresh frames
-    drawn the same way, each leaf learns its pixels' offsets to the joints near
-    them (joint votes).
+    Kinect-like noise on half of the frames. For a forest, then, on --vote-frames
+    fresh frames drawn the same way, each leaf learns its pixels' offsets to the
+    joints near them (joint votes). A net (--classifier net) keeps its sampled
+    pixels' features in memory as float16: frames x pixels x offsets x 2 bytes.
 
     Example: posedrift train --frames 2000 --seed 0 --out forest.npz
+
+    Example: posedrift train --classifier net --frames 12000 --pixels 600 --out net.npz
     """
     import time
     from dataclasses import replace
@@ -128,10 +146,21 @@ def train(
     from posedrift.labelling import fit_joint_votes
 
     check_output_file(out, "--out")
+    if classifier not in ("forest", "net"):
+        raise fail(f"--classifier must be 'forest' or 'net'. Got {classifier!r}.")
     try:
-        import sklearn  # noqa: F401
-    except ImportError as exc:
-        raise fail("posedrift train needs scikit-learn: pip install 'posedrift[train]'") from exc
+        widths = tuple(int(w) for w in hidden.split(","))
+        if not widths or min(widths) < 1:
+            raise ValueError
+    except ValueError:
+        raise fail(f"--hidden must be positive widths, comma-separated. Got {hidden!r}.") from None
+    if classifier == "forest":
+        try:
+            import sklearn  # noqa: F401
+        except ImportError as exc:
+            raise fail(
+                "posedrift train needs scikit-learn: pip install 'posedrift[train]'"
+            ) from exc
     exclude = list(exclude) if exclude else list(tr.HELD_OUT_CLIPS)
     mocap = mocap if mocap is not None else _default_mocap()
     started = time.perf_counter()
@@ -168,7 +197,7 @@ def train(
             frames, motions, ranges=ranges, weights=weights, frames=pose_frames, rng=render_rng
         )
         metadata = {
-            "command": "posedrift train",
+            "command": "posedrift train" + (" --classifier net" if classifier == "net" else ""),
             "seed": seed,
             "frames": frames,
             "clips": [p.name for p in paths],
@@ -178,9 +207,17 @@ def train(
             "wide_yaw": wide_yaw,
             "mirror_share": mirror_share,
             "min_pose_distance": min_pose_distance,
-            "vote_frames": vote_frames,
-            "vote_radius": vote_radius,
         }
+        if classifier == "net":
+            model = _train_net(tr, generator, frames, pixels, offsets, widths, epochs, fit_rng)
+            path = replace(model, metadata={**model.metadata, **metadata}).save(out)
+            typer.echo(
+                f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, a net of "
+                f"{model.n_features} features and hidden layers {list(model.hidden)}) "
+                f"in {time.perf_counter() - started:.0f} s"
+            )
+            return
+        metadata.update(vote_frames=vote_frames, vote_radius=vote_radius)
         with tr._progress(progress_enabled(), "rendering + features", frames) as advance:
             forest = tr.train_forest(
                 generator,
@@ -230,3 +267,21 @@ def train(
         f"wrote {path} ({size:.1f} MB, {forest.n_trees} trees, {forest.n_nodes} nodes) "
         f"in {time.perf_counter() - started:.0f} s"
     )
+
+
+def _train_net(tr, generator, frames, pixels, offsets, hidden, epochs, rng):
+    """The body-part net of ``posedrift train --classifier net``, with progress."""
+    with tr._progress(progress_enabled(), "rendering + features", frames) as advance:
+        return tr.train_net(
+            generator,
+            n_frames=frames,
+            n_offsets=offsets,
+            pixels_per_frame=pixels,
+            hidden=hidden,
+            epochs=epochs,
+            rng=rng,
+            on_frame=lambda _: advance(),
+            on_epoch=lambda e, loss: typer.echo(
+                f"epoch {e + 1}/{epochs}: loss {loss:.4f}", err=True
+            ),
+        )

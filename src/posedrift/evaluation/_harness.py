@@ -3,7 +3,7 @@
 Methods receive the depth frames (and, through them, the intrinsics) and nothing
 else; the reference goes to the metrics only. Each method is built by a factory
 registered in :data:`METHODS`, for each sequence afresh, with one body-part forest
-shared by all of them (loaded once).
+(and one body-part net) shared by all of them (loaded once).
 """
 
 from __future__ import annotations
@@ -34,29 +34,47 @@ from posedrift.tracking import FrameResult, FrameStatus, PoseMethod
 logger = logging.getLogger(__name__)
 
 MethodFactory = Callable[..., PoseMethod]
-"""``factory(intrinsics, *, forest) -> PoseMethod``; a factory whose attribute
+"""``factory(intrinsics, *, forest, part_net) -> PoseMethod``; a factory whose attribute
 ``seeded`` is true also takes ``rng=`` (the seed of the method's random point
 sampling: :func:`run_methods`' ``seed``)."""
 
 
 def _tracker(**options: Any) -> MethodFactory:
-    def factory(intrinsics: Intrinsics, *, forest: Any = None, rng: int = 0) -> PoseMethod:
+    def factory(
+        intrinsics: Intrinsics, *, forest: Any = None, part_net: Any = None, rng: int = 0
+    ) -> PoseMethod:
         from posedrift.tracking import PoseTracker
 
-        return PoseTracker(intrinsics, forest=forest, rng=rng, **options)
+        kwargs = {"part_net": part_net, **options}
+        return PoseTracker(intrinsics, forest=forest, rng=rng, **kwargs)
 
     factory.seeded = True  # type: ignore[attr-defined]
+    factory.takes_part_net = True  # type: ignore[attr-defined]
     return factory
 
 
-def _baseline(class_name: str, *, seeded: bool = False) -> MethodFactory:
-    def factory(intrinsics: Intrinsics, *, forest: Any = None, rng: int = 0) -> PoseMethod:
+def _baseline(class_name: str, *, seeded: bool = False, net_labels: bool = False) -> MethodFactory:
+    """A baseline of :mod:`posedrift.baselines`; with ``net_labels`` it labels pixels
+    with the part net instead of the forest (which labels them for the papers)."""
+
+    def factory(
+        intrinsics: Intrinsics, *, forest: Any = None, part_net: Any = None, rng: int = 0
+    ) -> PoseMethod:
         import posedrift.baselines as baselines
 
-        seed = {"rng": rng} if seeded else {}
-        return getattr(baselines, class_name)(intrinsics, forest=forest, **seed)
+        options: dict[str, Any] = {"rng": rng} if seeded else {}
+        if class_name == "ICPTracker":  # the tracker's loop: the tracker's labeller
+            options["part_net"] = part_net
+        if net_labels and part_net is None:
+            from posedrift.labelling import BodyPartNet
+
+            forest = BodyPartNet.load_default()
+        elif net_labels and not isinstance(part_net, str):  # "none": the forest labels
+            forest = part_net
+        return getattr(baselines, class_name)(intrinsics, forest=forest, **options)
 
     factory.seeded = seeded  # type: ignore[attr-defined]
+    factory.takes_part_net = True  # type: ignore[attr-defined]
     return factory
 
 
@@ -65,16 +83,29 @@ def _is_seeded(factory: MethodFactory) -> bool:
     return bool(getattr(factory, "seeded", False))
 
 
+def _takes_part_net(factory: MethodFactory) -> bool:
+    """Whether a factory takes ``part_net=`` (those of :data:`METHODS` do)."""
+    return bool(getattr(factory, "takes_part_net", False))
+
+
 METHODS: dict[str, tuple[str, MethodFactory]] = {
     "cpd": ("the tracker: nonrigid CPD, relabelling, warm start, 400 points", _tracker()),
     "shotton": (
         "Shotton et al. 2011 per frame: forest labels, mean shift",
         _baseline("ShottonBaseline"),
     ),
+    "shotton-net": (
+        "Shotton et al.'s per-frame joints from the part net's labels instead of the forest's",
+        _baseline("ShottonBaseline", net_labels=True),
+    ),
     "pda": ("Dinh et al. 2014 per frame: principal directions of parts", _baseline("PDABaseline")),
     "icp": (
         "the tracking loop with nearest-neighbour (ICP) correspondences",
         _baseline("ICPTracker", seeded=True),
+    ),
+    "cpd-forest": (
+        "ablation: the forest labels the pixels, no part net (the tracker before the net)",
+        _tracker(part_net="none"),
     ),
     "cpd-paper": (
         "ablation: the paper's pure tracking, no per-frame forest evidence",
@@ -103,7 +134,7 @@ METHODS: dict[str, tuple[str, MethodFactory]] = {
         _tracker(decimation=1),
     ),
 }
-"""Method name -> (description, factory ``f(intrinsics, *, forest) -> PoseMethod``)."""
+"""Method name -> (description, factory ``f(intrinsics, *, forest, part_net) -> PoseMethod``)."""
 
 DEFAULT_METHODS: tuple[str, ...] = ("cpd", "shotton", "pda", "icp")
 
@@ -126,7 +157,9 @@ def parse_methods(text: str | Sequence[str]) -> list[str]:
     return list(dict.fromkeys(names))
 
 
-def make_method(name: str, intrinsics: Intrinsics, *, forest: Any = None) -> PoseMethod:
+def make_method(
+    name: str, intrinsics: Intrinsics, *, forest: Any = None, part_net: Any = None
+) -> PoseMethod:
     """Build a registered method for one camera.
 
     Parameters
@@ -136,9 +169,11 @@ def make_method(name: str, intrinsics: Intrinsics, *, forest: Any = None) -> Pos
     intrinsics : Intrinsics
     forest : BodyPartForest, optional
         Shared by all methods; each loads the default model when None.
+    part_net : BodyPartNet, optional
+        Shared by the methods that label pixels with it; the default model when None.
     """
     (name,) = parse_methods([name])
-    return METHODS[name][1](intrinsics, forest=forest)
+    return METHODS[name][1](intrinsics, forest=forest, part_net=part_net)
 
 
 @dataclass
@@ -272,6 +307,7 @@ def run_methods(
     methods: Sequence[str] | Mapping[str, MethodFactory] = DEFAULT_METHODS,
     *,
     forest: Any = None,
+    part_net: Any = None,
     progress: bool = True,
     protocol: str | None = None,
     keep_frames: bool = False,
@@ -291,10 +327,14 @@ def run_methods(
         Consumed one at a time (a generator keeps only one sequence's frames in
         memory unless ``keep_frames``).
     methods : sequence of str, or mapping of name -> factory
-        Names from :data:`METHODS`, or factories ``f(intrinsics, *, forest)``.
+        Names from :data:`METHODS`, or factories ``f(intrinsics, *, forest)``
+        (which also get ``part_net=`` when one is given).
     forest : BodyPartForest, optional
         Shared by all methods. When None, the default model is loaded once here
         (if the package has one) and shared.
+    part_net : BodyPartNet or "none", optional
+        The part net of the methods that label pixels with one (the trackers,
+        ``shotton-net``); when None the default model is loaded once here and shared.
     progress : bool
         Draw a progress bar on standard error.
     protocol : str, optional
@@ -320,6 +360,8 @@ def run_methods(
     factories = _factories(methods)
     if forest is None:
         forest = _default_forest()
+    if part_net is None:
+        part_net = _default_part_net()
     total = None
     if isinstance(sequences, Sequence):
         total = sum(len(s.frames) for s in sequences) * len(factories)
@@ -341,7 +383,9 @@ def run_methods(
                 run_name = f"{name}, seed {seed}" if seed else name
                 bar.update(task, description=f"{seq.name}: {run_name}")
                 seeded = {"rng": seed} if _is_seeded(factory) else {}
-                method = factory(intrinsics, forest=forest, **seeded)
+                # Factories of one's own, f(intrinsics, *, forest), get no part_net.
+                shared_net = {"part_net": part_net} if _takes_part_net(factory) else {}
+                method = factory(intrinsics, forest=forest, **shared_net, **seeded)
                 run = MethodRun(method=name, sequence=seq.name, results=[], seconds=0.0)
                 observer = None
                 if keep_frames and name == "cpd":
@@ -453,6 +497,16 @@ def _default_forest() -> Any:
     except ImportError:
         return None
     return BodyPartForest.load_default()
+
+
+def _default_part_net() -> Any:
+    """The shipped part net, or "none" (the forest labels) where it cannot be loaded."""
+    from posedrift.labelling import BodyPartNet
+
+    try:
+        return BodyPartNet.load_default()
+    except ValueError:
+        return "none"
 
 
 def _status_counts(runs: list[MethodRun]) -> dict[str, int]:
@@ -638,6 +692,7 @@ def evaluate(
     methods: Sequence[str] | Mapping[str, MethodFactory] = DEFAULT_METHODS,
     *,
     forest: Any = None,
+    part_net: Any = None,
     progress: bool = True,
     figures_dir: str | Path | None = None,
     protocol: str | None = None,
@@ -654,6 +709,8 @@ def evaluate(
         Default ``("cpd", "shotton", "pda", "icp")``; see :data:`METHODS`.
     forest : BodyPartForest, optional
         Shared by all methods (the default model, loaded once, when None).
+    part_net : BodyPartNet or "none", optional
+        Shared by the methods that label pixels with it (see :func:`run_methods`).
     progress : bool
         Progress bar on standard error.
     figures_dir : path, optional
@@ -694,6 +751,7 @@ def evaluate(
         sequences,
         methods,
         forest=forest,
+        part_net=part_net,
         progress=progress,
         protocol=protocol,
         keep_frames=figures_dir is not None,
@@ -708,6 +766,7 @@ def evaluate(
                 sequences,
                 seeded,
                 forest=run.forest,
+                part_net=part_net,
                 progress=progress,
                 protocol=run.protocol,
                 on_skip=lambda name, reason: None,  # reported by the first run

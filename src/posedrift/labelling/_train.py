@@ -1,7 +1,7 @@
-"""Training the body-part forest: offset bank, pixel sampling, fitting, export.
+"""Training the body-part forest and net: offset bank, pixel sampling, fitting, export.
 
 scikit-learn (the ``train`` extra) is imported only inside :func:`train_forest`;
-loading and inference need NumPy alone.
+the net (:func:`train_net`), loading and inference need NumPy alone.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from posedrift._validation import check_rng, check_scalar
 from posedrift.camera import Intrinsics
 from posedrift.labelling._features import BACKGROUND_DEPTH, REFERENCE_FOCAL, feature_matrix
 from posedrift.labelling._forest import BodyPartForest
+from posedrift.labelling._net import BodyPartNet
 from posedrift.skeleton import PART_COLOURS, PART_NAMES
 
 MAX_OFFSET = 1.3 * REFERENCE_FOCAL
@@ -180,37 +181,22 @@ def train_forest(
     if offsets is None:
         offsets = offset_bank(n_offsets, rng=rng)
     offsets = np.asarray(offsets, dtype=np.float32)
-    capacity = n_frames * pixels_per_frame
-    x = np.empty((capacity, len(offsets)), dtype=np.float32)
-    y = np.empty(capacity, dtype=np.int16)
-    filled = 0
     started = time.perf_counter()
-    for i, frame in enumerate(frames):
-        if i >= n_frames:
-            break
-        mask = frame.mask
-        pixels = sample_pixels(frame.labels, mask, pixels_per_frame, balance=balance, rng=rng)
-        n = len(pixels)
-        if n:
-            feature_matrix(
-                frame.depth,
-                mask,
-                pixels,
-                offsets,
-                frame.intrinsics,
-                reference_focal=reference_focal,
-                background=background,
-                out=x[filled : filled + n],
-            )
-            y[filled : filled + n] = frame.labels[pixels[:, 0], pixels[:, 1]].astype(np.int16) - 1
-            filled += n
-        if on_frame is not None:
-            on_frame(i)
-    if filled == 0:
-        raise ValueError("train_forest got no labelled foreground pixel in its frames.")
+    x, y = _training_features(
+        frames,
+        n_frames,
+        offsets,
+        pixels_per_frame=pixels_per_frame,
+        balance=balance,
+        reference_focal=reference_focal,
+        background=background,
+        dtype=np.float32,
+        rng=rng,
+        on_frame=on_frame,
+        caller="train_forest",
+    )
+    filled = len(y)
     data_seconds = time.perf_counter() - started
-    x = x[:filled]
-    y = y[:filled]
     if on_stage is not None:
         on_stage("fit")
     cls = ExtraTreesClassifier if extra_trees else RandomForestClassifier
@@ -252,10 +238,170 @@ def train_forest(
     )
 
 
+def _training_features(
+    frames: Iterable[LabelledFrame],
+    n_frames: int,
+    offsets: np.ndarray,
+    *,
+    pixels_per_frame: int,
+    balance: float,
+    reference_focal: float,
+    background: float,
+    dtype: type,
+    rng: np.random.Generator,
+    on_frame: Callable[[int], None] | None,
+    caller: str,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Sampled pixels' features ``(N, K)`` (in ``dtype``) and parts ``(N,)`` int16 of
+    the first ``n_frames`` frames (:func:`sample_pixels` with ``balance``)."""
+    capacity = n_frames * pixels_per_frame
+    x = np.empty((capacity, len(offsets)), dtype=dtype)
+    y = np.empty(capacity, dtype=np.int16)
+    filled = 0
+    for i, frame in enumerate(frames):
+        if i >= n_frames:
+            break
+        mask = frame.mask
+        pixels = sample_pixels(frame.labels, mask, pixels_per_frame, balance=balance, rng=rng)
+        n = len(pixels)
+        if n:
+            block = feature_matrix(
+                frame.depth,
+                mask,
+                pixels,
+                offsets,
+                frame.intrinsics,
+                reference_focal=reference_focal,
+                background=background,
+                out=x[filled : filled + n] if dtype == np.float32 else None,
+            )
+            x[filled : filled + n] = block
+            y[filled : filled + n] = frame.labels[pixels[:, 0], pixels[:, 1]].astype(np.int16) - 1
+            filled += n
+        if on_frame is not None:
+            on_frame(i)
+    if filled == 0:
+        raise ValueError(f"{caller} got no labelled foreground pixel in its frames.")
+    return x[:filled], y[:filled]
+
+
+def train_net(
+    frames: Iterable[LabelledFrame],
+    *,
+    n_frames: int,
+    offsets: np.ndarray | None = None,
+    n_offsets: int = 500,
+    pixels_per_frame: int = 600,
+    balance: float = 0.5,
+    hidden: Sequence[int] = (512, 256, 128),
+    epochs: int = 8,
+    clip: float = 1.0,
+    reference_focal: float = REFERENCE_FOCAL,
+    background: float = BACKGROUND_DEPTH,
+    rng: int | np.random.Generator | None = None,
+    on_frame: Callable[[int], None] | None = None,
+    on_epoch: Callable[[int, float], None] | None = None,
+    metadata: dict | None = None,
+) -> BodyPartNet:
+    """Fit a body-part net (:class:`~posedrift.labelling.BodyPartNet`) on labelled frames.
+
+    The same pixels as :func:`train_forest` draws (:func:`sample_pixels`), their
+    features stored as float16 (half the memory; inputs clipped to ``clip`` metres
+    keep about 0.5 mm of resolution), then :func:`~posedrift.labelling.fit_perceptron`.
+
+    Parameters
+    ----------
+    frames : iterable of LabelledFrame
+        Consumed once; at most ``n_frames`` are used.
+    n_frames : int
+    offsets : (K, 4) float, optional
+        The offset bank; default :func:`offset_bank` of ``n_offsets``.
+    pixels_per_frame, balance :
+        As :func:`train_forest`'s.
+    hidden, epochs :
+        The perceptron's hidden widths and passes over the pixels.
+    clip : float
+        Metres; features are clipped to ``[-clip, clip]``.
+    rng : int, Generator or None
+        Seeds the offsets, the pixel sampling and the training.
+    on_frame, on_epoch : callable, optional
+        Progress: called with the frame index after each frame, and as
+        ``on_epoch(epoch, mean_loss)`` after each epoch.
+    metadata : dict, optional
+        Stored with the model (how it was trained).
+
+    Returns
+    -------
+    BodyPartNet
+
+    Raises
+    ------
+    ValueError
+        If no frame holds a labelled pixel.
+    """
+    from posedrift.labelling._net import fit_perceptron
+
+    n_frames = check_scalar(n_frames, "n_frames", low=1, include_low=True, integer=True)
+    rng = check_rng(rng)
+    if offsets is None:
+        offsets = offset_bank(n_offsets, rng=rng)
+    offsets = np.asarray(offsets, dtype=np.float32)
+    started = time.perf_counter()
+    x, y = _training_features(
+        frames,
+        n_frames,
+        offsets,
+        pixels_per_frame=pixels_per_frame,
+        balance=balance,
+        reference_focal=reference_focal,
+        background=background,
+        dtype=np.float16,
+        rng=rng,
+        on_frame=on_frame,
+        caller="train_net",
+    )
+    data_seconds = time.perf_counter() - started
+    started = time.perf_counter()
+    weights, biases = fit_perceptron(
+        x,
+        y,
+        hidden=hidden,
+        n_classes=len(PART_NAMES),
+        clip=clip,
+        epochs=epochs,
+        rng=rng,
+        on_epoch=on_epoch,
+    )
+    info = dict(metadata or {})
+    info.update(
+        {
+            "samples": len(y),
+            "offsets": len(offsets),
+            "hidden": [int(h) for h in hidden],
+            "epochs": int(epochs),
+            "clip": float(clip),
+            "pixels_per_frame": pixels_per_frame,
+            "balance": balance,
+            "data_seconds": round(data_seconds, 1),
+            "fit_seconds": round(time.perf_counter() - started, 1),
+            "parts": list(PART_NAMES),
+        }
+    )
+    return BodyPartNet(
+        offsets=offsets,
+        weights=weights,
+        biases=biases,
+        clip=clip,
+        reference_focal=reference_focal,
+        background=background,
+        metadata=info,
+    )
+
+
 def label_accuracy(
-    forest: BodyPartForest, frames: Sequence[LabelledFrame]
+    forest: BodyPartForest | BodyPartNet, frames: Sequence[LabelledFrame]
 ) -> tuple[float, np.ndarray, np.ndarray]:
-    """Per-pixel accuracy of ``forest`` on labelled frames.
+    """Per-pixel accuracy of ``forest`` (or a :class:`BodyPartNet`) on labelled frames.
 
     Returns
     -------
@@ -416,7 +562,7 @@ DISTANCE_BANDS: tuple[tuple[float, float], ...] = ((0.0, 1.5), (1.5, 2.5), (2.5,
 
 def evaluate_label_folder(
     folder: str | Path,
-    forest: BodyPartForest,
+    forest: BodyPartForest | BodyPartNet,
     *,
     max_frames: int | None = None,
     png: str | Path | None = None,
@@ -424,7 +570,7 @@ def evaluate_label_folder(
     progress: bool = False,
     on_skip: Callable[[str, str], None] | None = None,
 ) -> dict:
-    """Per-pixel label accuracy of ``forest`` on a ``posedrift synth`` folder.
+    """Per-pixel label accuracy of ``forest`` (or a net) on a ``posedrift synth`` folder.
 
     The forest sees each frame's depth and the true silhouette as its mask. Frames
     that cannot be read are skipped as :func:`read_label_folder` says (``on_skip``).

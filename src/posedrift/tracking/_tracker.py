@@ -3,12 +3,13 @@
 Per frame: segment the person; back-project (Eq. 1); downsample to about 400
 points; register the previous frame's labelled points onto them (nonrigid CPD,
 Algorithm 1, warm-started); carry the labels over through the posterior; fuse in
-the body-part forest's probabilities at the points' pixels (a product of experts,
+the per-pixel part probabilities at the points' pixels (a product of experts,
 beyond the paper: it stops the labels drifting; ``appearance_weight=0`` is the
 paper's pure tracking); relabel by geodesic reach from the part joints
 (Algorithm 2); mean-shift part modes; fit the skeleton with the calibrated bone
-lengths; judge the track's health, and re-initialize from the body-part forest
-when it is lost.
+lengths; judge the track's health, and re-initialize from the per-pixel labels
+when it is lost. The per-pixel labels come from the body-part net (beyond the paper;
+``part_net="none"`` gives the body-part forest's), the joint votes from the forest.
 """
 
 from __future__ import annotations
@@ -181,7 +182,18 @@ class PoseTracker:
         works. Loaded lazily with ``BodyPartForest.load_default()`` when None.
         ``"geometric"`` (also the fallback where no forest can be loaded) labels an
         upright person facing the camera from body proportions alone
-        (:func:`posedrift.tracking._init.geometric_labels`).
+        (:func:`posedrift.tracking._init.geometric_labels`). Its leaves cast the
+        joint votes (``vote_weights``); it labels pixels where there is no part net.
+    part_net : BodyPartNet or "none", optional
+        The per-pixel part probabilities (the appearance evidence fused every frame,
+        the labels of (re)initialization frames and the judge of a failed track),
+        beyond the paper: a perceptron over depth-comparison features that labels
+        pixels more accurately than the forest (docs/RESULTS.md). When None, the
+        shipped net (``BodyPartNet.load_default()``, loaded lazily) if ``forest`` is
+        None too, else the given forest labels, as before there was a net.
+        ``"none"`` (also the fallback where no net can be loaded) leaves the labels
+        to the forest, as in the paper. Any object with the net's ``predict_pixels``
+        works.
     relabel : bool
         Apply Algorithm 2 (geodesic relabelling) every frame.
     registration : {"nonrigid", "rigid"}
@@ -223,17 +235,17 @@ class PoseTracker:
         (:func:`working_decimation`: 2 for 640 x 480 cameras, 1 at 320 x 240); 1
         works at full resolution.
     appearance_weight : float
-        Exponent ``w`` of the body-part forest's per-point probabilities fused into
-        the tracked label evidence every frame (a product of experts, beyond the
-        paper): ``evidence(part) ~ (P_cpd + f) (P_forest + appearance_floor)^w``,
-        with ``P_cpd`` the labels carried over by registration and ``f`` = 0.02.
-        It stops labels drifting over long sequences. 0, with ``vote_weights``
-        ``(0, 0)``, gives the paper's pure tracking (the forest then labels only
-        the (re)initialization frames). Needs
-        a forest with ``predict_pixels``; ignored with ``forest="geometric"``.
+        Exponent ``w`` of the per-point part probabilities (the part net's, else the
+        forest's) fused into the tracked label evidence every frame (a product of
+        experts, beyond the paper): ``evidence(part) ~ (P_cpd + f) (P_pixel +
+        appearance_floor)^w``, with ``P_cpd`` the labels carried over by
+        registration and ``f`` = 0.02. It stops labels drifting over long sequences.
+        0, with ``vote_weights`` ``(0, 0)``, gives the paper's pure tracking (the
+        labeller then labels only the (re)initialization frames). Needs a labeller
+        with ``predict_pixels``; ignored with ``forest="geometric"`` and no part net.
     appearance_floor : float
-        Floor added to the forest's probabilities before fusion (how far a
-        confident forest may overrule the track).
+        Floor added to the per-point probabilities before fusion (how far a
+        confident labeller may overrule the track).
     temporal_smoothing : float
         In [0, 1): weight of the predicted joints in each fitted joint (when
         tracking, the previous skeleton moved by the registration's warp near the
@@ -285,6 +297,7 @@ class PoseTracker:
         *,
         n_points: int = 400,
         forest: Any = None,
+        part_net: Any = None,
         relabel: bool = True,
         registration: str = "nonrigid",
         correspondence: str = "cpd",
@@ -402,6 +415,14 @@ class PoseTracker:
         self.correspondence = correspondence
         self.warm_start = bool(warm_start)
         self.forest = forest
+        if isinstance(part_net, str) and part_net != "none":
+            raise ValueError(
+                f"The 'part_net' parameter of {caller} must be a BodyPartNet, 'none' or "
+                f"None. Got {part_net!r} instead."
+            )
+        if part_net is None and forest is not None:
+            part_net = "none"  # a forest of one's own labels, as before there was a net
+        self.part_net = part_net
         self.background = background
         self.segment_options = dict(segment_options or {})
         if decimation is not None:
@@ -743,17 +764,21 @@ class PoseTracker:
         return self._seed_registration
 
     def _pixel_evidence(self, depth, intr, mask, points, *, appearance: bool):
-        """What the forest says at each point's pixel: ``(probabilities, votes)``.
+        """What the labeller and the forest say at each point's pixel.
 
-        ``probabilities`` is ``(N, 15)`` (None unless ``appearance`` and an
-        appearance weight); ``votes`` the joint votes cast (:meth:`JointVotes.cast`;
-        None where the forest has none or the vote weights are 0). One descent
-        of the forest serves both.
+        Returns ``(probabilities, votes)``: ``probabilities`` is ``(N, 15)`` from the
+        labeller (:meth:`_get_labeller`; None unless ``appearance`` and an appearance
+        weight); ``votes`` the forest's joint votes cast (:meth:`JointVotes.cast`;
+        None where the forest has none or the vote weights are 0). Where the forest
+        is the labeller, one descent serves both.
         """
         forest = self._get_forest()
+        labeller = self._get_labeller()
         want_parts = appearance and self.appearance_weight > 0
+        want_parts = want_parts and hasattr(labeller, "predict_pixels")
         want_votes = max(self.vote_weights) > 0 and getattr(forest, "votes", None) is not None
-        if not hasattr(forest, "predict_pixels") or not (want_parts or want_votes):
+        want_votes = want_votes and hasattr(forest, "predict_pixels")
+        if not (want_parts or want_votes):
             return None, None
         # A point is a voxel centroid: take the pixel it projects to where that pixel
         # is the person's, else the nearest of the person's pixels within 3 pixels
@@ -772,12 +797,18 @@ class PoseTracker:
             rows[off[hit]], cols[off[hit]] = r[hit], c[hit]
             off = off[~hit]
         pixels = np.column_stack([rows, cols])
-        if not want_votes:
-            return forest.predict_pixels(depth, pixels, intr, mask=mask), None
-        parts, leaves = forest.predict_pixels(depth, pixels, intr, mask=mask, return_leaves=True)
-        # Each point votes from where it lies, not from the pixel it was read at.
-        votes = forest.votes.cast(points, leaves, joints=VOTED_JOINTS)
-        return (parts if want_parts else None), votes
+        parts = votes = None
+        if want_votes:
+            parts, leaves = forest.predict_pixels(
+                depth, pixels, intr, mask=mask, return_leaves=True
+            )
+            # Each point votes from where it lies, not from the pixel it was read at.
+            votes = forest.votes.cast(points, leaves, joints=VOTED_JOINTS)
+        if not want_parts:
+            parts = None
+        elif labeller is not forest or parts is None:
+            parts = labeller.predict_pixels(depth, pixels, intr, mask=mask)
+        return parts, votes
 
     def _fuse(self, post: np.ndarray, appearance: np.ndarray | None) -> np.ndarray:
         """Product of experts of the tracked posterior and the forest's probabilities."""
@@ -918,17 +949,30 @@ class PoseTracker:
                 self.forest = "geometric"
         return self.forest
 
+    def _get_labeller(self):
+        """What labels pixels: the part net (loaded on first use) or else the forest."""
+        if self.part_net is None:
+            try:
+                from posedrift.labelling import BodyPartNet
+
+                self.part_net = BodyPartNet.load_default()
+            except (OSError, ValueError, ImportError, AttributeError):
+                self.part_net = "none"
+        if isinstance(self.part_net, str):
+            return self._get_forest()
+        return self.part_net
+
     def _initialize(self, depth, intr, mask, full, pixels, points, graph) -> _Attempt | None:
         """Label the frame afresh, calibrate (first time) and fit a skeleton.
 
-        The forest labels the frame; where its skeleton is not healthy, the geometric
-        labelling of an upright person is tried too and the better one is kept (a
-        labelling built from its own skeleton always looks consistent, so it is
-        only a fallback).
+        The labeller (:meth:`_get_labeller`) labels the frame; where its skeleton is
+        not healthy, the geometric labelling of an upright person is tried too and
+        the better one is kept (a labelling built from its own skeleton always looks
+        consistent, so it is only a fallback).
         """
-        forest = self._get_forest()
-        sources = [forest]
-        if not (isinstance(forest, str) and forest == "geometric"):
+        labeller = self._get_labeller()
+        sources = [labeller]
+        if not (isinstance(labeller, str) and labeller == "geometric"):
             sources.append("geometric")
         saved = self._calibration
         best = None
@@ -954,12 +998,19 @@ class PoseTracker:
         if isinstance(source, str) and source == "geometric":
             labels, _ = geometric_labels(points)
         else:
-            pred = source.predict(depth, mask, intr)
-            label_img = np.asarray(pred.labels)
-            pix_labels = label_img[pixels[:, 0], pixels[:, 1]].astype(np.int64)
+            if source is self._get_forest():
+                voters = slice(None)
+                label_img = np.asarray(source.predict(depth, mask, intr).labels)
+                pix_labels = label_img[pixels[:, 0], pixels[:, 1]].astype(np.int64)
+            else:
+                # The net costs far more per pixel than the forest: every other row and
+                # column votes (a quarter of the pixels, still several per point).
+                voters = np.flatnonzero((pixels[:, 0] % 2 == 0) & (pixels[:, 1] % 2 == 0))
+                probabilities = source.predict_pixels(depth, pixels[voters], intr, mask=mask)
+                pix_labels = np.argmax(probabilities, axis=1).astype(np.int64)
             if np.count_nonzero(pix_labels >= 0) < self.min_points:
                 return None
-            labels = label_template_points(points, full, pix_labels)
+            labels = label_template_points(points, full[voters], pix_labels)
         labels = smooth_labels(labels, graph.rows, graph.cols)
         fresh_calibration = self._calibration is None
         if fresh_calibration:
