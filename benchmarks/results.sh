@@ -1,28 +1,36 @@
 #!/usr/bin/env bash
-# Reproduce the tables of docs/RESULTS.md (about 45 minutes, one core at a time).
-# Usage: bash benchmarks/results.sh [OUT_DIR]   (needs ../shared/data or $POSEDRIFT_DATA)
+# Reproduce the tables of docs/RESULTS.md (about an hour, one core at a time).
+# Usage: bash benchmarks/results.sh [OUT_DIR] [PART]   (needs ../shared/data or $POSEDRIFT_DATA)
+# PART is all (the default), tables, repeats or speed: on a two-core machine run
+# "tables" and "repeats" side by side (two commands, one core each), then "speed" alone.
 set -euo pipefail
 here="$(cd "$(dirname "$0")/.." && pwd)"
 data="${POSEDRIFT_DATA:-$here/../shared/data}"
 out="${1:-results}"
+part="${2:-all}"
+case "$part" in all|tables|repeats|speed) ;; *) echo "unknown part: $part" >&2; exit 2;; esac
 mkdir -p "$out"
 M="$data/mocap"
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1
 methods=cpd,shotton,pda,icp
+# The headline tables also run the tracker without the part net (cpd-forest: the forest
+# labels its pixels) and Shotton et al.'s joints from the net's labels (shotton-net).
+wide=cpd,cpd-forest,shotton,shotton-net,pda,icp
 
+tables() {
 # Table 1 on development clips the default forest was trained on, and on held-out clips.
 posedrift -q eval synthetic builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" "$M/cmu/002_10.bvh" \
-    "$M/cmu/001_08.bvh" --frames 500 --methods "$methods" --json "$out/table1_dev.json" \
+    "$M/cmu/001_08.bvh" --frames 500 --methods "$wide" --json "$out/table1_dev.json" \
     --figures "$out/figures_dev" | tee "$out/table1_dev.md"
 posedrift -q eval synthetic "$M/cmu-original-skeleton/131_03.bvh" "$M/cmu/007_03.bvh" \
-    "$M/cmu/007_05.bvh" "$M/cmu/007_08.bvh" --frames 500 --methods "$methods" \
+    "$M/cmu/007_05.bvh" "$M/cmu/007_08.bvh" --frames 500 --methods "$wide" \
     --json "$out/table1_heldout.json" | tee "$out/table1_heldout.md"
 # With Kinect-like depth noise.
-posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 --noise --methods "$methods" \
-    --json "$out/table1_noise.json" | tee "$out/table1_noise.md"
+posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 --noise \
+    --methods "$methods,cpd-forest" --json "$out/table1_noise.json" | tee "$out/table1_noise.md"
 # The same in a room: a floor and a wall that every method must segment away.
 posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 --noise --room \
-    --methods "$methods" --json "$out/table1_room.json" | tee "$out/table1_room.md"
+    --methods "$methods,cpd-forest" --json "$out/table1_room.json" | tee "$out/table1_room.md"
 # A 640 x 480 camera: the tracker on every other pixel (the default) and on every pixel.
 for d in 2.0 3.5; do
     posedrift -q eval synthetic builtin "$M/cmu/007_03.bvh" "$M/cmu/002_07.bvh" \
@@ -51,14 +59,25 @@ done
 # A person too near the camera (1.6 m: head and feet cut off by the image's edges).
 posedrift -q eval synthetic builtin "$M/cmu/007_03.bvh" "$M/cmu/007_05.bvh" "$M/cmu/002_07.bvh" \
     --frames 300 --distance 1.6 --methods "$methods" --json "$out/near.json" | tee "$out/near.md"
+# Real Kinect recordings: one sequence per action, subject (a mod 4) + 1, trial 1.
+seqs=$(for a in $(seq 1 27); do printf "a%d_s%d_t1," "$a" $(( a % 4 + 1 )); done)
+posedrift -q eval utd "$data/utd-mhad" --sequences "${seqs%,}" --methods "$wide" \
+    --json "$out/utd.json" | tee "$out/utd.md"
+# The second trial of every action and subject: recordings the Kinect offsets were not fitted on.
+seqs2=$(for a in $(seq 1 27); do for s in 1 2 3 4; do printf "a%d_s%d_t2," "$a" "$s"; done; done)
+posedrift -q eval utd "$data/utd-mhad" --sequences "${seqs2%,}" --methods "$wide" \
+    --json "$out/utd_trial2.json" | tee "$out/utd_trial2.md"
 # Drift on the same poses at both ends: each clip's first 250 frames forward, then backward.
 posedrift -q eval synthetic builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" "$M/cmu/002_10.bvh" \
     "$M/cmu/001_08.bvh" "$M/cmu-original-skeleton/131_03.bvh" "$M/cmu/007_03.bvh" \
     "$M/cmu/007_05.bvh" --frames 500 --there-and-back --methods cpd,shotton,icp \
     --json "$out/there_and_back.json" | tee "$out/there_and_back.md"
+}
+
+repeats() {
 # The tracker against ICP-style tracking over five point samples each (seeds 0-4), on the
 # development and held-out clips, with noise, in a room, a tall body, too near, and on the
-# UTD-MHAD trials of the Table 1 runs below.
+# UTD-MHAD trials of the Table 1 runs.
 repeat() { name=$1; shift; posedrift -q eval synthetic "$@" --methods cpd,icp --repeats 5 \
     --no-paper --json "$out/repeats_$name.json" | tee "$out/repeats_$name.md"; }
 repeat dev builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" "$M/cmu/002_10.bvh" \
@@ -83,17 +102,20 @@ python "$here/benchmarks/label_oracle.py" builtin "$M/cmu/002_05.bvh" "$M/cmu/00
 # How the previous skeleton is carried into the next frame, against the true joint motion.
 python "$here/benchmarks/carried_joints_figure.py" "$M/cmu/002_07.bvh" "$out/carried_joints.png" \
     --frames 300 | tee "$out/carried_joints.md"
-# Real Kinect recordings: one sequence per action, subject (a mod 4) + 1, trial 1.
-seqs=$(for a in $(seq 1 27); do printf "a%d_s%d_t1," "$a" $(( a % 4 + 1 )); done)
-posedrift -q eval utd "$data/utd-mhad" --sequences "${seqs%,}" --methods "$methods" \
-    --json "$out/utd.json" | tee "$out/utd.md"
-# The second trial of every action and subject: recordings the Kinect offsets were not fitted on.
-seqs2=$(for a in $(seq 1 27); do for s in 1 2 3 4; do printf "a%d_s%d_t2," "$a" "$s"; done; done)
-posedrift -q eval utd "$data/utd-mhad" --sequences "${seqs2%,}" --methods "$methods" \
-    --json "$out/utd_trial2.json" | tee "$out/utd_trial2.md"
+}
+
+speed() {
 # Speed of the tracker, per stage, one core: the person alone, in a room, and at 640 x 480.
 posedrift -q bench track --frames 300 --repeats 3 --json "$out/bench_track.json" | tee "$out/bench_track.md"
 posedrift -q bench track --frames 300 --repeats 3 --room --json "$out/bench_track_room.json" \
     | tee "$out/bench_track_room.md"
 posedrift -q bench track --frames 300 --repeats 3 --room --camera d435 --distance 2.0 \
     --json "$out/bench_track_vga.json" | tee "$out/bench_track_vga.md"
+}
+
+case "$part" in
+    all) tables; repeats; speed ;;
+    tables) tables ;;
+    repeats) repeats ;;
+    speed) speed ;;
+esac

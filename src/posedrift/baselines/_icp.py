@@ -23,9 +23,9 @@ class ICPTracker:
     ----------
     intrinsics : Intrinsics
     forest : BodyPartForest, optional
-        The shared body-part forest (for initialization).
+        The shared body-part forest (joint votes; pixel labels where there is no part net).
     **options
-        Passed on to :class:`~posedrift.tracking.PoseTracker` (``n_points``,
+        Passed on to :class:`~posedrift.tracking.PoseTracker` (``part_net``, ``n_points``,
         ``relabel``, ``warm_start``, ``rng``...).
     """
 

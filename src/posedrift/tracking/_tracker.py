@@ -799,19 +799,20 @@ class PoseTracker:
         pixels = np.column_stack([rows, cols])
         parts = votes = None
         if want_votes:
-            parts, leaves = forest.predict_pixels(
+            forest_parts, leaves = forest.predict_pixels(
                 depth, pixels, intr, mask=mask, return_leaves=True
             )
             # Each point votes from where it lies, not from the pixel it was read at.
             votes = forest.votes.cast(points, leaves, joints=VOTED_JOINTS)
-        if not want_parts:
-            parts = None
-        elif labeller is not forest or parts is None:
-            parts = labeller.predict_pixels(depth, pixels, intr, mask=mask)
+        if want_parts:
+            reuse = want_votes and labeller is forest
+            parts = (
+                forest_parts if reuse else labeller.predict_pixels(depth, pixels, intr, mask=mask)
+            )
         return parts, votes
 
     def _fuse(self, post: np.ndarray, appearance: np.ndarray | None) -> np.ndarray:
-        """Product of experts of the tracked posterior and the forest's probabilities."""
+        """Product of experts of the tracked posterior and the per-pixel probabilities."""
         if appearance is None:
             return post
         total = post.sum(axis=1, keepdims=True)
@@ -998,7 +999,7 @@ class PoseTracker:
         if isinstance(source, str) and source == "geometric":
             labels, _ = geometric_labels(points)
         else:
-            if source is self._get_forest():
+            if source is self._get_forest():  # a forest (or stand-in) needs only predict
                 voters = slice(None)
                 label_img = np.asarray(source.predict(depth, mask, intr).labels)
                 pix_labels = label_img[pixels[:, 0], pixels[:, 1]].astype(np.int64)
