@@ -116,7 +116,7 @@ def train(
     hidden: Annotated[
         str,
         typer.Option("--hidden", help="Net only: widths of the hidden layers, comma-separated."),
-    ] = "512,256,128",
+    ] = "256,256,128",
     epochs: Annotated[
         int, typer.Option("--epochs", min=1, help="Net only: passes over the sampled pixels.")
     ] = 8,

@@ -34,9 +34,10 @@ from posedrift.tracking import FrameResult, FrameStatus, PoseMethod
 logger = logging.getLogger(__name__)
 
 MethodFactory = Callable[..., PoseMethod]
-"""``factory(intrinsics, *, forest, part_net) -> PoseMethod``; a factory whose attribute
+"""``factory(intrinsics, *, forest) -> PoseMethod``; a factory whose attribute
 ``seeded`` is true also takes ``rng=`` (the seed of the method's random point
-sampling: :func:`run_methods`' ``seed``)."""
+sampling: :func:`run_methods`' ``seed``), and one whose attribute ``takes_part_net``
+is true takes ``part_net=`` (the shared body-part net)."""
 
 
 def _tracker(**options: Any) -> MethodFactory:
@@ -53,9 +54,12 @@ def _tracker(**options: Any) -> MethodFactory:
     return factory
 
 
-def _baseline(class_name: str, *, seeded: bool = False, net_labels: bool = False) -> MethodFactory:
-    """A baseline of :mod:`posedrift.baselines`; with ``net_labels`` it labels pixels
-    with the part net instead of the forest (which labels them for the papers)."""
+def _baseline(
+    class_name: str, *, seeded: bool = False, tracker_loop: bool = False, net_labels: bool = False
+) -> MethodFactory:
+    """A baseline of :mod:`posedrift.baselines`. One that runs the tracker's loop
+    (``tracker_loop``) labels pixels as the tracker does (``part_net`` passed on); a
+    per-frame one with the forest, as its paper does, or with ``net_labels`` the part net."""
 
     def factory(
         intrinsics: Intrinsics, *, forest: Any = None, part_net: Any = None, rng: int = 0
@@ -63,7 +67,7 @@ def _baseline(class_name: str, *, seeded: bool = False, net_labels: bool = False
         import posedrift.baselines as baselines
 
         options: dict[str, Any] = {"rng": rng} if seeded else {}
-        if class_name == "ICPTracker":  # the tracker's loop: the tracker's labeller
+        if tracker_loop:
             options["part_net"] = part_net
         if net_labels and part_net is None:
             from posedrift.labelling import BodyPartNet
@@ -101,7 +105,7 @@ METHODS: dict[str, tuple[str, MethodFactory]] = {
     "pda": ("Dinh et al. 2014 per frame: principal directions of parts", _baseline("PDABaseline")),
     "icp": (
         "the tracking loop with nearest-neighbour (ICP) correspondences",
-        _baseline("ICPTracker", seeded=True),
+        _baseline("ICPTracker", seeded=True, tracker_loop=True),
     ),
     "cpd-forest": (
         "ablation: the forest labels the pixels, no part net (the tracker before the net)",
@@ -327,8 +331,9 @@ def run_methods(
         Consumed one at a time (a generator keeps only one sequence's frames in
         memory unless ``keep_frames``).
     methods : sequence of str, or mapping of name -> factory
-        Names from :data:`METHODS`, or factories ``f(intrinsics, *, forest)``
-        (which also get ``part_net=`` when one is given).
+        Names from :data:`METHODS`, or factories ``f(intrinsics, *, forest)`` (given
+        ``part_net=`` too where the factory's attribute ``takes_part_net`` is true, as
+        for those of :data:`METHODS`).
     forest : BodyPartForest, optional
         Shared by all methods. When None, the default model is loaded once here
         (if the package has one) and shared.

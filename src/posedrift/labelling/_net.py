@@ -192,7 +192,8 @@ class BodyPartNet:
         >>> from posedrift.camera import camera_preset
         >>> cam = camera_preset("kinect1-qvga")
         >>> depth = np.zeros(cam.shape, np.float32); depth[100:140, 150:170] = 2.5
-        >>> rows = BodyPartNet.load_default().predict_pixels(depth, np.array([[120, 160], [0, 0]]), cam)
+        >>> net = BodyPartNet.load_default()
+        >>> rows = net.predict_pixels(depth, np.array([[120, 160], [0, 0]]), cam)
         >>> rows.shape, bool(np.allclose(rows[1], 1 / 15))  # (0, 0) is background: uniform
         ((2, 15), True)
         """
@@ -429,7 +430,7 @@ def fit_perceptron(
     x: np.ndarray,
     y: np.ndarray,
     *,
-    hidden: Sequence[int] = (512, 256, 128),
+    hidden: Sequence[int] = (256, 256, 128),
     n_classes: int | None = None,
     clip: float = 1.0,
     epochs: int = 8,

@@ -293,7 +293,7 @@ def train_net(
     n_offsets: int = 500,
     pixels_per_frame: int = 600,
     balance: float = 0.5,
-    hidden: Sequence[int] = (512, 256, 128),
+    hidden: Sequence[int] = (256, 256, 128),
     epochs: int = 8,
     clip: float = 1.0,
     reference_focal: float = REFERENCE_FOCAL,
