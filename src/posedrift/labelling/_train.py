@@ -19,7 +19,7 @@ from posedrift._validation import check_rng, check_scalar
 from posedrift.camera import Intrinsics
 from posedrift.labelling._features import BACKGROUND_DEPTH, REFERENCE_FOCAL, feature_matrix
 from posedrift.labelling._forest import BodyPartForest
-from posedrift.labelling._net import BodyPartNet
+from posedrift.labelling._net import BodyPartNet, fit_perceptron
 from posedrift.skeleton import PART_COLOURS, PART_NAMES
 
 MAX_OFFSET = 1.3 * REFERENCE_FOCAL
@@ -265,6 +265,7 @@ def _training_features(
         pixels = sample_pixels(frame.labels, mask, pixels_per_frame, balance=balance, rng=rng)
         n = len(pixels)
         if n:
+            direct = x.dtype == np.float32  # written in place; float16 via a float32 block
             block = feature_matrix(
                 frame.depth,
                 mask,
@@ -273,9 +274,10 @@ def _training_features(
                 frame.intrinsics,
                 reference_focal=reference_focal,
                 background=background,
-                out=x[filled : filled + n] if dtype == np.float32 else None,
+                out=x[filled : filled + n] if direct else None,
             )
-            x[filled : filled + n] = block
+            if not direct:
+                x[filled : filled + n] = block
             y[filled : filled + n] = frame.labels[pixels[:, 0], pixels[:, 1]].astype(np.int16) - 1
             filled += n
         if on_frame is not None:
@@ -306,8 +308,9 @@ def train_net(
     """Fit a body-part net (:class:`~posedrift.labelling.BodyPartNet`) on labelled frames.
 
     The same pixels as :func:`train_forest` draws (:func:`sample_pixels`), their
-    features stored as float16 (half the memory; inputs clipped to ``clip`` metres
-    keep about 0.5 mm of resolution), then :func:`~posedrift.labelling.fit_perceptron`.
+    features stored as float16 (half the memory; within the ``clip`` of 1 m that the
+    net reads, float16 resolves 1 mm or finer), then
+    :func:`~posedrift.labelling.fit_perceptron`.
 
     Parameters
     ----------
@@ -339,8 +342,6 @@ def train_net(
     ValueError
         If no frame holds a labelled pixel.
     """
-    from posedrift.labelling._net import fit_perceptron
-
     n_frames = check_scalar(n_frames, "n_frames", low=1, include_low=True, integer=True)
     rng = check_rng(rng)
     if offsets is None:
