@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from posedrift.cli._app import bench_app, fail, progress_enabled
-from posedrift.cli._options import CameraOption
+from posedrift.cli._options import CameraOption, NetOption, load_part_net
 
 
 @bench_app.command("track")
@@ -44,6 +44,7 @@ def bench_track_command(
     json_out: Annotated[
         Path | None, typer.Option("--json", help="Write the result as JSON here.")
     ] = None,
+    net: NetOption = None,
 ) -> None:
     """Time the tracker per stage on a rendered synthetic sequence, on one thread.
 
@@ -56,6 +57,8 @@ def bench_track_command(
     Example: OMP_NUM_THREADS=1 posedrift bench track --frames 300 --repeats 3 --json track.json
 
     Example: posedrift bench track --room --camera d435 --distance 2.0
+
+    Example: posedrift bench track --net none   # the forest labels the pixels
     """
     import json
 
@@ -73,6 +76,7 @@ def bench_track_command(
         if camera not in CAMERA_PRESETS:
             raise fail(f"--camera must be one of {', '.join(CAMERA_PRESETS)}. Got {camera!r}.")
         placement["intrinsics"] = CAMERA_PRESETS[camera]
+    part_net = load_part_net(net)
     try:
         if progress_enabled():
             from rich.progress import Progress
@@ -94,6 +98,7 @@ def bench_track_command(
             repeats=repeats,
             stage_clock=stage_clock,
             scene="room (floor, wall, depth noise)" if room else "",
+            tracker_options=None if part_net is None else {"part_net": part_net},
         )
     except ValueError as exc:
         raise fail(str(exc)) from exc

@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from posedrift.cli._app import eval_app, fail, progress_enabled
+from posedrift.cli._options import NetOption, load_part_net
 
 _METHODS_HELP = (
     "Comma-separated methods: cpd, shotton, pda, icp, shotton-net (Shotton's joints from "
@@ -15,10 +16,6 @@ _METHODS_HELP = (
     "net), cpd-paper, icp-paper (the paper's pure tracking, no per-frame evidence), "
     "cpd-norelabel, cpd-novotes (no joint votes), cpd-rigid, cpd-cold, cpd-reinit (a failed "
     "track always re-initialized), cpd-200, cpd-400, cpd-800, cpd-fullres."
-)
-_NET_HELP = (
-    "Body-part net file of the trackers and shotton-net (default: shipped); 'none' leaves "
-    "the trackers' pixel labels to the forest."
 )
 
 
@@ -37,18 +34,6 @@ def _forest(model: Path | None):
 
     try:
         return BodyPartForest.load(model)
-    except ValueError as exc:
-        raise fail(str(exc)) from exc
-
-
-def _part_net(net: str | None):
-    """The part net the methods share: None (the default), "none" or a loaded file."""
-    if net is None or net == "none":
-        return net
-    from posedrift.labelling import BodyPartNet
-
-    try:
-        return BodyPartNet.load(net)
     except ValueError as exc:
         raise fail(str(exc)) from exc
 
@@ -148,7 +133,7 @@ def eval_synthetic(
             "--model", help="Body-part forest file shared by all methods (default: shipped)."
         ),
     ] = None,
-    net: Annotated[str | None, typer.Option("--net", help=_NET_HELP)] = None,
+    net: NetOption = None,
     height: Annotated[
         float | None,
         typer.Option(
@@ -234,7 +219,7 @@ def eval_synthetic(
             sequences,
             names,
             forest=_forest(model),
-            part_net=_part_net(net),
+            part_net=load_part_net(net),
             progress=progress_enabled(),
             figures_dir=figures,
             protocol="synthetic",
@@ -333,7 +318,7 @@ def eval_utd(
             "--model", help="Body-part forest file shared by all methods (default: shipped)."
         ),
     ] = None,
-    net: Annotated[str | None, typer.Option("--net", help=_NET_HELP)] = None,
+    net: NetOption = None,
     convention: Annotated[
         str,
         typer.Option(
@@ -422,7 +407,7 @@ def eval_utd(
             loaded(),
             names,
             forest=_forest(model),
-            part_net=_part_net(net),
+            part_net=load_part_net(net),
             progress=progress_enabled(),
             figures_dir=figures,
             protocol="utd",

@@ -1,4 +1,4 @@
-"""Command-line options shared by the commands that read a depth recording."""
+"""Command-line options shared by the commands that read a depth recording or track."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import numpy as np
 import typer
 
 from posedrift.camera import CAMERA_PRESETS
+from posedrift.cli._app import fail
 
 DepthInput = Annotated[
     Path,
@@ -29,6 +30,14 @@ DepthScaleOption = Annotated[
     typer.Option(
         "--depth-scale",
         help="Depth units per metre: 1000 (mm, default), 5000 (TUM), or mm / tum / m.",
+    ),
+]
+NetOption = Annotated[
+    str | None,
+    typer.Option(
+        "--net",
+        help="Body-part net file that labels the trackers' pixels (default: shipped); 'none' "
+        "leaves the labels to the forest.",
     ),
 ]
 FpsOption = Annotated[
@@ -53,3 +62,21 @@ def depth_scale_hint(depth_m: float) -> str:
         f"depths of {depth_m:g} m look like raw sensor units read as metres: "
         f"give --depth-scale (1000 for millimetres)"
     )
+
+
+def load_part_net(net: str | None):
+    """``--net``: None (the shipped net), "none", or the net read from the file named.
+
+    Raises
+    ------
+    typer.Exit
+        Exit status 2, with the reader's message, if the file is not a body-part net.
+    """
+    if net is None or net == "none":
+        return net
+    from posedrift.labelling import BodyPartNet
+
+    try:
+        return BodyPartNet.load(net)
+    except ValueError as exc:
+        raise fail(str(exc)) from exc
