@@ -265,18 +265,17 @@ def test_offset_bank_and_pixel_sampling_are_seeded():
     assert counts.min() >= 500 / 15 * 0.5
 
 
-def test_default_model_labels_a_held_out_clip(mocap_dir):
-    """The shipped model on three fresh frames of a clip kept out of its training."""
+def held_out_frames(mocap_dir, views) -> list[LabelledFrame]:
+    """Fresh renders of 007_01 (kept out of the shipped models' training), one per
+    ``(frame, yaw)`` of ``views``, the frame at 90 with Kinect-like noise."""
     from posedrift.labelling._train import render_training_frame
     from posedrift.synthetic import BodyModel, bvh_motion
 
-    forest = BodyPartForest.load_default()
-    assert forest.metadata["excluded"] and "007_01.bvh" not in forest.metadata["clips"]
     motion = bvh_motion(mocap_dir / "cmu" / "007_01.bvh")
     body = BodyModel.load_default().with_shape(height=1.68, girth=1.1)
     rng = np.random.default_rng(0)
     frames = []
-    for t, yaw in ((30, 0.0), (90, 25.0), (140, -30.0)):
+    for t, yaw in views:
         joints = np.asarray(motion.joints[t], dtype=float)
         scale = 1.68 / _stature_of(motion)
         origin = np.array([joints[:, 0].mean(), 0.0, joints[:, 2].mean()])
@@ -295,6 +294,14 @@ def test_default_model_labels_a_held_out_clip(mocap_dir):
                 rng=rng,
             )
         )
+    return frames
+
+
+def test_default_model_labels_a_held_out_clip(mocap_dir):
+    """The shipped model on three fresh frames of a clip kept out of its training."""
+    forest = BodyPartForest.load_default()
+    assert forest.metadata["excluded"] and "007_01.bvh" not in forest.metadata["clips"]
+    frames = held_out_frames(mocap_dir, ((30, 0.0), (90, 25.0), (140, -30.0)))
     accuracy, correct, total = label_accuracy(forest, frames)
     assert accuracy >= 0.75
     for side in ("left", "right"):

@@ -7,7 +7,7 @@ import zipfile
 
 import numpy as np
 import pytest
-from tests.test_forest import CAM, _stature_of, toy_frame
+from tests.test_forest import CAM, held_out_frames, toy_frame
 
 from posedrift.labelling import BodyPartForest, BodyPartNet, fit_perceptron
 from posedrift.labelling._features import feature_matrix
@@ -219,34 +219,9 @@ def test_truncated_and_pickled_files_are_rejected(toy_net, tmp_path):
 
 def test_default_net_labels_a_held_out_clip_better_than_the_forest(mocap_dir):
     """The shipped models on fresh frames of a clip kept out of their training."""
-    from posedrift.labelling._train import render_training_frame
-    from posedrift.synthetic import BodyModel, bvh_motion
-
     net = BodyPartNet.load_default()
     assert "007_01.bvh" not in net.metadata["clips"] and net.metadata["excluded"]
-    motion = bvh_motion(mocap_dir / "cmu" / "007_01.bvh")
-    body = BodyModel.load_default().with_shape(height=1.68, girth=1.1)
-    rng = np.random.default_rng(0)
-    frames = []
-    for t, yaw in ((30, 0.0), (90, 25.0), (140, -30.0), (120, 10.0)):
-        joints = np.asarray(motion.joints[t], dtype=float)
-        scale = 1.68 / _stature_of(motion)
-        origin = np.array([joints[:, 0].mean(), 0.0, joints[:, 2].mean()])
-        extras = {k: origin + (np.asarray(v[t]) - origin) * scale for k, v in motion.extras.items()}
-        frames.append(
-            render_training_frame(
-                origin + (joints - origin) * scale,
-                extras,
-                body,
-                CAM,
-                yaw=yaw,
-                distance=2.8,
-                camera_height=1.0,
-                aim_at_body=False,
-                noise=t == 90,
-                rng=rng,
-            )
-        )
+    frames = held_out_frames(mocap_dir, ((30, 0.0), (90, 25.0), (140, -30.0), (120, 10.0)))
     accuracy, correct, total = label_accuracy(net, frames)
     forest_accuracy, _, _ = label_accuracy(BodyPartForest.load_default(), frames)
     # measured: 0.935 (the forest 0.883); every part of these frames 0.87 or more

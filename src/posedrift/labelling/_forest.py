@@ -8,12 +8,9 @@ each pixel computes only the one feature its current node asks for.
 
 from __future__ import annotations
 
-import io
 import json
-import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from importlib import resources
 from os import PathLike
 from pathlib import Path
 from types import MappingProxyType
@@ -30,6 +27,13 @@ from posedrift.labelling._features import (
     pixel_terms,
     probe,
     probe_image,
+)
+from posedrift.labelling._modelfile import (
+    check_header,
+    float_scalars,
+    open_archive,
+    read_model_file,
+    read_packaged_model,
 )
 from posedrift.labelling._votes import JointVotes
 from posedrift.skeleton import PART_NAMES
@@ -341,12 +345,7 @@ class BodyPartForest:
             truncated or corrupt, or holds arrays of the wrong shape, dtype or range
             (children or feature ids out of range, cycles, non-finite values).
         """
-        path = Path(path)
-        try:
-            data = path.read_bytes()
-        except OSError as exc:
-            raise ValueError(f"Cannot read the forest model file {path}: {exc}.") from exc
-        return cls._from_bytes(data, str(path))
+        return cls._from_bytes(read_model_file(path, "forest model"), str(Path(path)))
 
     @classmethod
     def load_default(cls) -> BodyPartForest:
@@ -354,73 +353,32 @@ class BodyPartForest:
 
         Loaded once per process and shared: the model is immutable.
         """
-        if _LOADED_DEFAULT:
-            return _LOADED_DEFAULT[0]
-        resource = resources.files("posedrift").joinpath("data", _DEFAULT_MODEL)
-        try:
-            data = resource.read_bytes()
-        except (FileNotFoundError, OSError) as exc:
-            raise ValueError(
-                f"The default forest model {_DEFAULT_MODEL} is missing from the posedrift "
-                f"package; train one with 'posedrift train --out MODEL'."
-            ) from exc
-        forest = cls._from_bytes(data, f"posedrift/data/{_DEFAULT_MODEL}")
-        _LOADED_DEFAULT.append(forest)
-        return forest
+        if not _LOADED_DEFAULT:
+            data = read_packaged_model(_DEFAULT_MODEL, "forest model", "posedrift train")
+            _LOADED_DEFAULT.append(cls._from_bytes(data, f"posedrift/data/{_DEFAULT_MODEL}"))
+        return _LOADED_DEFAULT[0]
 
     @classmethod
     def _from_bytes(cls, data: bytes, where: str) -> BodyPartForest:
         prefix = f"The forest model file {where}"
-        if not data.startswith(b"PK"):
-            raise ValueError(f"{prefix} is truncated or corrupt: not an .npz archive (a zip file).")
-        try:
-            with np.load(io.BytesIO(data), allow_pickle=False) as npz:
-                missing = [k for k in _KEYS if k not in npz.files]
-                if "format" in npz.files and "version" in npz.files:
-                    fmt = _scalar_text(npz["format"])
-                    if fmt != FORMAT_NAME:
-                        raise ValueError(f"{prefix} is not a posedrift forest (format {fmt!r}).")
-                    version = npz["version"]
-                    if version.shape != () or not np.issubdtype(version.dtype, np.integer):
-                        raise ValueError(f"{prefix} has an unreadable format version.")
-                    if int(version) != FORMAT_VERSION:
-                        raise ValueError(
-                            f"{prefix} has format version {int(version)}; this posedrift reads "
-                            f"version {FORMAT_VERSION}. Retrain it with 'posedrift train'."
-                        )
-                if missing:
-                    raise ValueError(f"{prefix} is not a posedrift forest: missing {missing}.")
-                arrays = {k: npz[k] for k in _KEYS}
-                stored = [k for k in _VOTE_KEYS if k in npz.files]
-                if stored and len(stored) != len(_VOTE_KEYS):
-                    raise ValueError(
-                        f"{prefix} has incomplete joint votes: "
-                        f"missing {sorted(set(_VOTE_KEYS) - set(stored))}."
-                    )
-                vote_arrays = {k: npz[k] for k in stored}
-        except ValueError as exc:
-            if str(exc).startswith(prefix):
-                raise
-            raise ValueError(f"{prefix} cannot be read safely: {exc}") from exc
-        except (OSError, EOFError, KeyError, zipfile.BadZipFile) as exc:
-            raise ValueError(f"{prefix} is truncated or corrupt: {exc}") from exc
-        parts = arrays["part_names"]
-        if parts.dtype.kind != "U" or tuple(parts.tolist()) != PART_NAMES:
-            raise ValueError(f"{prefix} was trained for other body parts: {parts.tolist()!r}.")
-        try:
-            metadata = json.loads(_scalar_text(arrays["metadata"]))
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{prefix} has unreadable metadata: {exc}") from exc
-        if not isinstance(metadata, dict):
-            raise ValueError(f"{prefix} has unreadable metadata (not an object).")
-        scalars = {}
-        for name in ("reference_focal", "background"):
-            value = arrays[name]
-            if value.shape != () or value.dtype.kind != "f":
-                raise ValueError(
-                    f"{prefix} has a malformed '{name}' ({value.dtype}, {value.shape})."
-                )
-            scalars[name] = float(value)
+        arrays = open_archive(data, prefix)
+        metadata = check_header(
+            arrays,
+            prefix,
+            kind="forest",
+            format_name=FORMAT_NAME,
+            version=FORMAT_VERSION,
+            command="posedrift train",
+            required=_KEYS[2:],
+        )
+        stored = [k for k in _VOTE_KEYS if k in arrays]
+        if stored and len(stored) != len(_VOTE_KEYS):
+            raise ValueError(
+                f"{prefix} has incomplete joint votes: "
+                f"missing {sorted(set(_VOTE_KEYS) - set(stored))}."
+            )
+        vote_arrays = {k: arrays[k] for k in stored}
+        scalars = float_scalars(arrays, ("reference_focal", "background"), prefix)
         leaf_values = arrays["leaf_values"]
         if leaf_values.dtype not in (np.float16, np.float32):
             raise ValueError(
@@ -728,12 +686,6 @@ def _node_table(arrays: dict[str, np.ndarray]) -> np.ndarray:
     table = table.view(np.int64)
     table.setflags(write=False)
     return table
-
-
-def _scalar_text(value: np.ndarray) -> str:
-    if value.shape != () or value.dtype.kind != "U":
-        raise ValueError(f"expected a text scalar, got {value.dtype} of shape {value.shape}")
-    return str(value)
 
 
 def _floor_float32(threshold: np.ndarray) -> np.ndarray:

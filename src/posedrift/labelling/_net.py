@@ -17,13 +17,10 @@ framework).
 
 from __future__ import annotations
 
-import io
 import itertools
 import json
-import zipfile
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from importlib import resources
 from os import PathLike
 from pathlib import Path
 from types import MappingProxyType
@@ -41,6 +38,13 @@ from posedrift.labelling._features import (
     feature_matrix,
 )
 from posedrift.labelling._forest import MAX_OFFSET, PartPrediction
+from posedrift.labelling._modelfile import (
+    check_header,
+    float_scalars,
+    open_archive,
+    read_model_file,
+    read_packaged_model,
+)
 from posedrift.skeleton import PART_NAMES
 
 FORMAT_NAME = "posedrift-body-part-net"
@@ -49,6 +53,8 @@ MAX_LAYERS = 16
 """Most layers a model file may hold."""
 
 _DEFAULT_MODEL = "part_net_default.npz"
+_KEYS = ("part_names", "metadata", "reference_focal", "background", "clip", "offsets", "n_layers")
+"""What a model file holds besides its format, version and layers."""
 _LOADED_DEFAULT: list = []  # the default model, once loaded
 _BLOCK = 4096  # pixels per block at inference: bounds the hidden activations' memory
 
@@ -257,12 +263,7 @@ class BodyPartNet:
             If the file is not a posedrift body-part net, has another format version,
             is truncated or corrupt, or holds arrays of the wrong shape or dtype.
         """
-        path = Path(path)
-        try:
-            data = path.read_bytes()
-        except OSError as exc:
-            raise ValueError(f"Cannot read the body-part net file {path}: {exc}.") from exc
-        return cls._from_bytes(data, str(path))
+        return cls._from_bytes(read_model_file(path, "body-part net"), str(Path(path)))
 
     @classmethod
     def load_default(cls) -> BodyPartNet:
@@ -270,97 +271,53 @@ class BodyPartNet:
 
         Loaded once per process and shared: the model is immutable.
         """
-        if _LOADED_DEFAULT:
-            return _LOADED_DEFAULT[0]
-        resource = resources.files("posedrift").joinpath("data", _DEFAULT_MODEL)
-        try:
-            data = resource.read_bytes()
-        except (FileNotFoundError, OSError) as exc:
-            raise ValueError(
-                f"The default body-part net {_DEFAULT_MODEL} is missing from the posedrift "
-                f"package; train one with 'posedrift train --classifier net --out MODEL'."
-            ) from exc
-        net = cls._from_bytes(data, f"posedrift/data/{_DEFAULT_MODEL}")
-        _LOADED_DEFAULT.append(net)
-        return net
+        if not _LOADED_DEFAULT:
+            data = read_packaged_model(
+                _DEFAULT_MODEL, "body-part net", "posedrift train --classifier net"
+            )
+            _LOADED_DEFAULT.append(cls._from_bytes(data, f"posedrift/data/{_DEFAULT_MODEL}"))
+        return _LOADED_DEFAULT[0]
 
     @classmethod
     def _from_bytes(cls, data: bytes, where: str) -> BodyPartNet:
         prefix = f"The body-part net file {where}"
-        if not data.startswith(b"PK"):
-            raise ValueError(f"{prefix} is truncated or corrupt: not an .npz archive (a zip file).")
-        try:
-            with np.load(io.BytesIO(data), allow_pickle=False) as npz:
-                arrays = {k: npz[k] for k in npz.files}
-        except ValueError as exc:
-            raise ValueError(f"{prefix} cannot be read safely: {exc}") from exc
-        except (OSError, EOFError, KeyError, zipfile.BadZipFile) as exc:
-            raise ValueError(f"{prefix} is truncated or corrupt: {exc}") from exc
-        try:
-            return _net_from_arrays(arrays, prefix)
-        except ValueError as exc:
-            if str(exc).startswith(prefix):
-                raise
-            raise ValueError(f"{prefix} is invalid: {exc}") from exc
-
-
-def _net_from_arrays(arrays: dict[str, np.ndarray], prefix: str) -> BodyPartNet:
-    """A :class:`BodyPartNet` from a model file's arrays, each checked."""
-    fmt = _text(arrays.get("format"))
-    if fmt != FORMAT_NAME:
-        raise ValueError(f"{prefix} is not a posedrift body-part net (format {fmt!r}).")
-    version = arrays.get("version")
-    if version is None or version.shape != () or not np.issubdtype(version.dtype, np.integer):
-        raise ValueError(f"{prefix} has an unreadable format version.")
-    if int(version) != FORMAT_VERSION:
-        raise ValueError(
-            f"{prefix} has format version {int(version)}; this posedrift reads version "
-            f"{FORMAT_VERSION}. Retrain it with 'posedrift train --classifier net'."
+        arrays = open_archive(data, prefix)
+        metadata = check_header(
+            arrays,
+            prefix,
+            kind="body-part net",
+            format_name=FORMAT_NAME,
+            version=FORMAT_VERSION,
+            command="posedrift train --classifier net",
+            required=_KEYS,
         )
-    required = ("part_names", "metadata", "reference_focal", "background", "clip")
-    missing = [k for k in (*required, "offsets", "n_layers") if k not in arrays]
-    if missing:
-        raise ValueError(f"{prefix} is not a posedrift body-part net: missing {missing}.")
-    parts = arrays["part_names"]
-    if parts.dtype.kind != "U" or tuple(parts.tolist()) != PART_NAMES:
-        raise ValueError(f"{prefix} was trained for other body parts: {parts.tolist()!r}.")
-    try:
-        metadata = json.loads(_text(arrays["metadata"]))
-    except (json.JSONDecodeError, TypeError) as exc:
-        raise ValueError(f"{prefix} has unreadable metadata: {exc}") from exc
-    if not isinstance(metadata, dict):
-        raise ValueError(f"{prefix} has unreadable metadata (not an object).")
-    scalars = {}
-    for name in ("reference_focal", "background", "clip"):
-        value = arrays[name]
-        if value.shape != () or value.dtype.kind != "f":
-            raise ValueError(f"{prefix} has a malformed '{name}' ({value.dtype}, {value.shape}).")
-        scalars[name] = float(value)
-    n_layers = arrays["n_layers"]
-    if n_layers.shape != () or n_layers.dtype.kind not in "iu" or not 1 <= n_layers <= MAX_LAYERS:
-        raise ValueError(f"{prefix} has a malformed layer count.")
-    names = [f"{kind}_{i}" for i in range(int(n_layers)) for kind in ("weight", "bias")]
-    missing = [k for k in names if k not in arrays]
-    if missing:
-        raise ValueError(f"{prefix} is not a posedrift body-part net: missing {missing}.")
-    for name in ("offsets", *names):
-        if arrays[name].dtype.kind != "f":
-            raise ValueError(
-                f"{prefix} has '{name}' of dtype {arrays[name].dtype}; expected float."
+        scalars = float_scalars(arrays, ("reference_focal", "background", "clip"), prefix)
+        n_layers = arrays["n_layers"]
+        if (
+            n_layers.shape != ()
+            or n_layers.dtype.kind not in "iu"
+            or not 1 <= n_layers <= MAX_LAYERS
+        ):
+            raise ValueError(f"{prefix} has a malformed layer count.")
+        names = [f"{kind}_{i}" for i in range(int(n_layers)) for kind in ("weight", "bias")]
+        missing = [k for k in names if k not in arrays]
+        if missing:
+            raise ValueError(f"{prefix} is not a posedrift body-part net: missing {missing}.")
+        for name in ("offsets", *names):
+            if arrays[name].dtype.kind != "f":
+                raise ValueError(
+                    f"{prefix} has '{name}' of dtype {arrays[name].dtype}; expected float."
+                )
+        try:
+            return cls(
+                offsets=arrays["offsets"],
+                weights=tuple(arrays[f"weight_{i}"] for i in range(int(n_layers))),
+                biases=tuple(arrays[f"bias_{i}"] for i in range(int(n_layers))),
+                metadata=metadata,
+                **scalars,
             )
-    return BodyPartNet(
-        offsets=arrays["offsets"],
-        weights=tuple(arrays[f"weight_{i}"] for i in range(int(n_layers))),
-        biases=tuple(arrays[f"bias_{i}"] for i in range(int(n_layers))),
-        metadata=metadata,
-        **scalars,
-    )
-
-
-def _text(value: np.ndarray | None) -> str | None:
-    if value is None or value.shape != () or value.dtype.kind != "U":
-        return None
-    return str(value)
+        except ValueError as exc:
+            raise ValueError(f"{prefix} is invalid: {exc}") from exc
 
 
 def _validate(offsets, weights, biases, clip, reference_focal):

@@ -176,16 +176,12 @@ def train_forest(
     """
     from sklearn.ensemble import ExtraTreesClassifier, RandomForestClassifier
 
-    n_frames = check_scalar(n_frames, "n_frames", low=1, include_low=True, integer=True)
     rng = check_rng(rng)
-    if offsets is None:
-        offsets = offset_bank(n_offsets, rng=rng)
-    offsets = np.asarray(offsets, dtype=np.float32)
-    started = time.perf_counter()
-    x, y = _training_features(
+    offsets, x, y, data_seconds = _training_features(
         frames,
         n_frames,
         offsets,
+        n_offsets=n_offsets,
         pixels_per_frame=pixels_per_frame,
         balance=balance,
         reference_focal=reference_focal,
@@ -196,7 +192,6 @@ def train_forest(
         caller="train_forest",
     )
     filled = len(y)
-    data_seconds = time.perf_counter() - started
     if on_stage is not None:
         on_stage("fit")
     cls = ExtraTreesClassifier if extra_trees else RandomForestClassifier
@@ -241,8 +236,9 @@ def train_forest(
 def _training_features(
     frames: Iterable[LabelledFrame],
     n_frames: int,
-    offsets: np.ndarray,
+    offsets: np.ndarray | None,
     *,
+    n_offsets: int,
     pixels_per_frame: int,
     balance: float,
     reference_focal: float,
@@ -251,9 +247,19 @@ def _training_features(
     rng: np.random.Generator,
     on_frame: Callable[[int], None] | None,
     caller: str,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Sampled pixels' features ``(N, K)`` (in ``dtype``) and parts ``(N,)`` int16 of
-    the first ``n_frames`` frames (:func:`sample_pixels` with ``balance``)."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """The training data of a labeller: ``(offsets, x, y, seconds)``.
+
+    ``offsets`` the bank (:func:`offset_bank` of ``n_offsets`` where none is given),
+    ``x`` the sampled pixels' features ``(N, K)`` in ``dtype``, ``y`` their parts
+    ``(N,)`` int16, from the first ``n_frames`` frames (:func:`sample_pixels` with
+    ``balance``), and the seconds it took.
+    """
+    n_frames = check_scalar(n_frames, "n_frames", low=1, include_low=True, integer=True)
+    if offsets is None:
+        offsets = offset_bank(n_offsets, rng=rng)
+    offsets = np.asarray(offsets, dtype=np.float32)
+    started = time.perf_counter()
     capacity = n_frames * pixels_per_frame
     x = np.empty((capacity, len(offsets)), dtype=dtype)
     y = np.empty(capacity, dtype=np.int16)
@@ -284,7 +290,7 @@ def _training_features(
             on_frame(i)
     if filled == 0:
         raise ValueError(f"{caller} got no labelled foreground pixel in its frames.")
-    return x[:filled], y[:filled]
+    return offsets, x[:filled], y[:filled], time.perf_counter() - started
 
 
 def train_net(
@@ -342,16 +348,12 @@ def train_net(
     ValueError
         If no frame holds a labelled pixel.
     """
-    n_frames = check_scalar(n_frames, "n_frames", low=1, include_low=True, integer=True)
     rng = check_rng(rng)
-    if offsets is None:
-        offsets = offset_bank(n_offsets, rng=rng)
-    offsets = np.asarray(offsets, dtype=np.float32)
-    started = time.perf_counter()
-    x, y = _training_features(
+    offsets, x, y, data_seconds = _training_features(
         frames,
         n_frames,
         offsets,
+        n_offsets=n_offsets,
         pixels_per_frame=pixels_per_frame,
         balance=balance,
         reference_focal=reference_focal,
@@ -361,7 +363,6 @@ def train_net(
         on_frame=on_frame,
         caller="train_net",
     )
-    data_seconds = time.perf_counter() - started
     started = time.perf_counter()
     weights, biases = fit_perceptron(
         x,
