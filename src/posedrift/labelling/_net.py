@@ -140,8 +140,8 @@ class BodyPartNet:
             )
         out = np.empty((len(x), self.n_parts), dtype=np.float32)
         for start in range(0, len(x), _BLOCK):
-            block = np.clip(x[start : start + _BLOCK], -self.clip, self.clip, dtype=np.float32)
-            out[start : start + len(block)] = _softmax(_forward(block, self.weights, self.biases))
+            block = np.array(x[start : start + _BLOCK], dtype=np.float32)  # a copy to clip
+            out[start : start + len(block)] = self._classify(block)
         return out
 
     def predict(
@@ -222,6 +222,10 @@ class BodyPartNet:
             reference_focal=self.reference_focal,
             background=self.background,
         )
+        return self._classify(x)
+
+    def _classify(self, x: np.ndarray) -> np.ndarray:
+        """Probabilities of float32 features ``x`` that this call owns (clipped in place)."""
         np.clip(x, -self.clip, self.clip, out=x)
         return _softmax(_forward(x, self.weights, self.biases))
 
