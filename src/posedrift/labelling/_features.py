@@ -102,6 +102,13 @@ def checked_frame(
     return depth, valid
 
 
+def foreground_pixels(valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The foreground of a labeller's frame, row-major: ``(flat indices, (N, 2) pixels)``."""
+    flat = np.flatnonzero(valid)
+    rows, cols = np.divmod(flat, valid.shape[1])
+    return flat, np.column_stack([rows, cols]).astype(np.intp)
+
+
 def checked_pixels(pixels: np.ndarray, shape: tuple[int, int], caller: str) -> np.ndarray:
     """``(N, 2)`` integer ``(row, column)`` pixels inside an image of ``shape``, as intp.
 

@@ -24,6 +24,7 @@ from posedrift.labelling._features import (
     REFERENCE_FOCAL,
     checked_frame,
     checked_pixels,
+    foreground_pixels,
     pixel_terms,
     probe,
     probe_image,
@@ -443,9 +444,7 @@ class BodyPartForest:
         ((240, 320), (0, 15))
         """
         depth, valid = checked_frame(depth, mask, intrinsics, "BodyPartForest.predict")
-        flat = np.flatnonzero(valid)
-        rows, cols = np.divmod(flat, depth.shape[1])
-        pixels = np.column_stack([rows, cols]).astype(np.intp)
+        flat, pixels = foreground_pixels(valid)
         labels = np.full(depth.shape, -1, dtype=np.int16)
         if len(pixels) == 0:
             return PartPrediction(

@@ -36,6 +36,7 @@ from posedrift.labelling._features import (
     checked_frame,
     checked_pixels,
     feature_matrix,
+    foreground_pixels,
 )
 from posedrift.labelling._forest import MAX_OFFSET, PartPrediction
 from posedrift.labelling._modelfile import (
@@ -162,9 +163,7 @@ class BodyPartNet:
         ((240, 320), (0, 15))
         """
         depth, valid = checked_frame(depth, mask, intrinsics, "BodyPartNet.predict")
-        flat = np.flatnonzero(valid)
-        rows, cols = np.divmod(flat, depth.shape[1])
-        pixels = np.column_stack([rows, cols]).astype(np.intp)
+        flat, pixels = foreground_pixels(valid)
         labels = np.full(depth.shape, -1, dtype=np.int16)
         probabilities = np.zeros((len(pixels), self.n_parts), dtype=np.float32)
         for start in range(0, len(pixels), _BLOCK):
