@@ -13,9 +13,10 @@ mkdir -p "$out"
 M="$data/mocap"
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1
 methods=cpd,shotton,pda,icp
-# The headline tables also run the tracker without the part net (cpd-forest: the forest
-# labels its pixels) and Shotton et al.'s joints from the net's labels (shotton-net).
-wide=cpd,cpd-forest,shotton,shotton-net,pda,icp
+# The headline tables also run the tracker with the frontal net alone (cpd-frontal), without
+# the part nets (cpd-forest: the forest labels its pixels) and Shotton et al.'s joints from
+# the net's labels (shotton-net).
+wide=cpd,cpd-frontal,cpd-forest,shotton,shotton-net,pda,icp
 
 tables() {
 # Table 1 on development clips the default forest was trained on, and on held-out clips.

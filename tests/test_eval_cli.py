@@ -278,6 +278,27 @@ def test_eval_rejects_unknown_methods(tmp_path):
     assert "Unknown method(s) ['magic']" in result.stderr
 
 
+def test_part_net_options_are_checked_before_any_work(tmp_path):
+    from posedrift.cli._options import load_part_net
+    from posedrift.labelling import BodyPartNet, FacingNets
+
+    args = ["eval", "synthetic", "builtin", "--frames", "2"]
+    result = CliRunner().invoke(app, [*args, "--net", "none", "--turned-net", "x.npz"])
+    assert result.exit_code == 2 and "--turned-net needs a part net" in result.stderr
+    (tmp_path / "bad.npz").write_bytes(b"not a model")
+    result = CliRunner().invoke(app, [*args, "--turned-net", str(tmp_path / "bad.npz")])
+    assert result.exit_code == 2 and "bad.npz" in result.stderr
+    assert load_part_net(None) is None and load_part_net("none", "none") == "none"
+    path = BodyPartNet.load_default().save(tmp_path / "net.npz")
+    own = load_part_net(str(path))  # a net of one's own serves every view
+    assert isinstance(own, BodyPartNet)
+    pair = load_part_net(str(path), str(path))
+    assert isinstance(pair, FacingNets) and isinstance(pair.turned, BodyPartNet)
+    shipped = load_part_net(None, "none")
+    assert shipped is BodyPartNet.load_default()
+    assert load_part_net(None, str(path)).frontal is BodyPartNet.load_default()
+
+
 def test_figures_are_written(tmp_path):
     from posedrift.evaluation._figures import crossing_scores
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from tests.test_forest import CAM, held_out_frames, toy_frame
 
-from posedrift.labelling import BodyPartForest, BodyPartNet, fit_perceptron
+from posedrift.labelling import BodyPartForest, BodyPartNet, FacingNets, fit_perceptron
 from posedrift.labelling._features import feature_matrix
 from posedrift.labelling._net import FORMAT_VERSION, _forward, _gradients
 from posedrift.labelling._train import label_accuracy, train_net
@@ -230,6 +230,48 @@ def test_default_net_labels_a_held_out_clip_better_than_the_forest(mocap_dir):
         for part in ("upper_arm", "forearm", "hand", "thigh", "shank"):
             i = PART_NAMES.index(f"{side}_{part}")
             assert correct[i] / total[i] > 0.8, (side, part)
+
+
+def test_turned_net_labels_people_seen_from_behind(mocap_dir):
+    """The shipped turned net on a held-out clip seen from behind and half turned, where
+    the frontal net reads a mirror image; and its lesser labels of frontal views."""
+    turned = BodyPartNet.load_default("turned")
+    frontal = BodyPartNet.load_default()
+    assert turned.metadata["wide_yaw"] == 180.0 and turned.metadata["wide_share"] == 1.0
+    behind = held_out_frames(mocap_dir, ((30, 180.0), (90, 150.0), (140, -160.0), (120, 110.0)))
+    accuracy, _, _ = label_accuracy(turned, behind)
+    frontal_accuracy, _, _ = label_accuracy(frontal, behind)
+    # measured: 0.861 (the frontal net 0.432, a mirror image)
+    assert accuracy >= 0.8 and accuracy > frontal_accuracy + 0.2
+    facing = held_out_frames(mocap_dir, ((30, 0.0), (140, -30.0)))
+    # measured: 0.828 (the frontal net 0.939): why the tracker asks it only once turned
+    assert label_accuracy(turned, facing)[0] >= 0.75
+
+
+def test_facing_nets_choose_by_the_turn_and_label_frames_as_the_frontal_one(toy_net):
+    other = BodyPartNet(toy_net.offsets, toy_net.weights, toy_net.biases, clip=toy_net.clip)
+    nets = FacingNets(toy_net, other, turn_gate=45)
+    assert nets.turn_gate == 45.0
+    assert nets.select(None) is toy_net and nets.select(float("nan")) is toy_net
+    assert nets.select(45.0) is toy_net and nets.select(45.5) is other
+    frame = toy_frame(np.random.default_rng(3))
+    pixels = np.argwhere(frame.mask)[:50]
+    np.testing.assert_array_equal(
+        nets.predict_pixels(frame.depth, pixels, CAM, mask=frame.mask),
+        toy_net.predict_pixels(frame.depth, pixels, CAM, mask=frame.mask),
+    )
+    np.testing.assert_array_equal(
+        nets.predict(frame.depth, frame.mask, CAM).labels,
+        toy_net.predict(frame.depth, frame.mask, CAM).labels,
+    )
+    for gate in (-1.0, 181.0, float("nan"), "30"):
+        with pytest.raises(ValueError, match="'turn_gate' parameter of FacingNets"):
+            FacingNets(toy_net, other, turn_gate=gate)
+    with pytest.raises(ValueError, match="'views' parameter of BodyPartNet.load_default"):
+        BodyPartNet.load_default("behind")
+    shipped = FacingNets.load_default()
+    assert shipped.frontal is BodyPartNet.load_default()
+    assert shipped.turned is BodyPartNet.load_default("turned")
 
 
 def test_cli_train_net_is_reproducible_and_checks_its_options(tmp_path):

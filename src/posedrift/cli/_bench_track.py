@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from posedrift.cli._app import bench_app, fail, progress_enabled
-from posedrift.cli._options import CameraOption, NetOption, load_part_net
+from posedrift.cli._options import CameraOption, NetOption, TurnedNetOption, load_part_net
 
 
 @bench_app.command("track")
@@ -45,6 +45,7 @@ def bench_track_command(
         Path | None, typer.Option("--json", help="Write the result as JSON here.")
     ] = None,
     net: NetOption = None,
+    turned_net: TurnedNetOption = None,
 ) -> None:
     """Time the tracker per stage on a rendered synthetic sequence, on one thread.
 
@@ -76,7 +77,7 @@ def bench_track_command(
         if camera not in CAMERA_PRESETS:
             raise fail(f"--camera must be one of {', '.join(CAMERA_PRESETS)}. Got {camera!r}.")
         placement["intrinsics"] = CAMERA_PRESETS[camera]
-    part_net = load_part_net(net)
+    part_net = load_part_net(net, turned_net)
     try:
         if progress_enabled():
             from rich.progress import Progress

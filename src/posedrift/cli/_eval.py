@@ -8,12 +8,13 @@ from typing import Annotated
 import typer
 
 from posedrift.cli._app import eval_app, fail, progress_enabled
-from posedrift.cli._options import NetOption, load_part_net
+from posedrift.cli._options import NetOption, TurnedNetOption, load_part_net
 
 _METHODS_HELP = (
     "Comma-separated methods: cpd, shotton, pda, icp, shotton-net (Shotton's joints from "
-    "the part net's labels), and the ablations cpd-forest (the forest's labels, no part "
-    "net), cpd-paper, icp-paper (the paper's pure tracking, no per-frame evidence), "
+    "the part net's labels), and the ablations cpd-frontal (the frontal part net for "
+    "every view, no turned net), cpd-forest (the forest's labels, no part net), cpd-paper, "
+    "icp-paper (the paper's pure tracking, no per-frame evidence), "
     "cpd-norelabel, cpd-novotes (no joint votes), cpd-rigid, cpd-cold, cpd-reinit (a failed "
     "track always re-initialized), cpd-200, cpd-400, cpd-800, cpd-fullres."
 )
@@ -134,6 +135,7 @@ def eval_synthetic(
         ),
     ] = None,
     net: NetOption = None,
+    turned_net: TurnedNetOption = None,
     height: Annotated[
         float | None,
         typer.Option(
@@ -219,7 +221,7 @@ def eval_synthetic(
             sequences,
             names,
             forest=_forest(model),
-            part_net=load_part_net(net),
+            part_net=load_part_net(net, turned_net),
             progress=progress_enabled(),
             figures_dir=figures,
             protocol="synthetic",
@@ -319,6 +321,7 @@ def eval_utd(
         ),
     ] = None,
     net: NetOption = None,
+    turned_net: TurnedNetOption = None,
     convention: Annotated[
         str,
         typer.Option(
@@ -407,7 +410,7 @@ def eval_utd(
             loaded(),
             names,
             forest=_forest(model),
-            part_net=load_part_net(net),
+            part_net=load_part_net(net, turned_net),
             progress=progress_enabled(),
             figures_dir=figures,
             protocol="utd",

@@ -36,8 +36,16 @@ NetOption = Annotated[
     str | None,
     typer.Option(
         "--net",
-        help="Body-part net file that labels the trackers' pixels (default: shipped); 'none' "
-        "leaves the labels to the forest.",
+        help="Body-part net file that labels the trackers' pixels (default: the shipped "
+        "frontal and turned nets); 'none' leaves the labels to the forest.",
+    ),
+]
+TurnedNetOption = Annotated[
+    str | None,
+    typer.Option(
+        "--turned-net",
+        help="Body-part net file that takes over once the skeleton turns away (default: "
+        "the shipped one, unless --net names a file); 'none': the --net net for every view.",
     ),
 ]
 FpsOption = Annotated[
@@ -64,19 +72,35 @@ def depth_scale_hint(depth_m: float) -> str:
     )
 
 
-def load_part_net(net: str | None):
-    """``--net``: None (the shipped net), "none", or the net read from the file named.
+def load_part_net(net: str | None, turned_net: str | None = None):
+    """``--net`` and ``--turned-net``: what labels the trackers' pixels.
+
+    None (both unset: the shipped pair, loaded where used), "none" (the forest), a
+    net read from the file named, or a :class:`~posedrift.labelling.FacingNets`
+    pair of it and the turned net.
 
     Raises
     ------
     typer.Exit
-        Exit status 2, with the reader's message, if the file is not a body-part net.
+        Exit status 2, with the reader's message, if a file is not a body-part net,
+        or if --turned-net is given with --net none.
     """
-    if net is None or net == "none":
+    if net == "none":
+        if turned_net not in (None, "none"):
+            raise fail("--turned-net needs a part net: it cannot be used with --net none.")
         return net
-    from posedrift.labelling import BodyPartNet
+    if net is None and turned_net is None:
+        return None
+    from posedrift.labelling import BodyPartNet, FacingNets
 
-    try:
-        return BodyPartNet.load(net)
-    except ValueError as exc:
-        raise fail(str(exc)) from exc
+    def read(path: str) -> BodyPartNet:
+        try:
+            return BodyPartNet.load(path)
+        except ValueError as exc:
+            raise fail(str(exc)) from exc
+
+    frontal = BodyPartNet.load_default() if net is None else read(net)
+    if turned_net == "none" or (turned_net is None and net is not None):
+        return frontal
+    turned = BodyPartNet.load_default("turned") if turned_net is None else read(turned_net)
+    return FacingNets(frontal, turned)

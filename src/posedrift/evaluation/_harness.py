@@ -54,6 +54,25 @@ def _tracker(**options: Any) -> MethodFactory:
     return factory
 
 
+def _frontal_tracker() -> MethodFactory:
+    """The tracker with the frontal net of the shared pair alone (no turned net)."""
+    whole = _tracker()
+
+    def factory(
+        intrinsics: Intrinsics, *, forest: Any = None, part_net: Any = None, rng: int = 0
+    ) -> PoseMethod:
+        if part_net is None:
+            from posedrift.labelling import BodyPartNet
+
+            part_net = BodyPartNet.load_default()
+        frontal = getattr(part_net, "frontal", part_net)  # a FacingNets pair's, or the net
+        return whole(intrinsics, forest=forest, part_net=frontal, rng=rng)
+
+    factory.seeded = True  # type: ignore[attr-defined]
+    factory.takes_part_net = True  # type: ignore[attr-defined]
+    return factory
+
+
 def _baseline(
     class_name: str, *, seeded: bool = False, tracker_loop: bool = False, net_labels: bool = False
 ) -> MethodFactory:
@@ -106,6 +125,10 @@ METHODS: dict[str, tuple[str, MethodFactory]] = {
     "icp": (
         "the tracking loop with nearest-neighbour (ICP) correspondences",
         _baseline("ICPTracker", seeded=True, tracker_loop=True),
+    ),
+    "cpd-frontal": (
+        "ablation: the frontal part net alone, for every view (no turned net)",
+        _frontal_tracker(),
     ),
     "cpd-forest": (
         "ablation: the forest labels the pixels, no part net (the tracker before the net)",
@@ -173,8 +196,8 @@ def make_method(
     intrinsics : Intrinsics
     forest : BodyPartForest, optional
         Shared by all methods; each loads the default model when None.
-    part_net : BodyPartNet, optional
-        Shared by the methods that label pixels with it; the default model when None.
+    part_net : BodyPartNet or FacingNets, optional
+        Shared by the methods that label pixels with it; the shipped nets when None.
     """
     (name,) = parse_methods([name])
     return METHODS[name][1](intrinsics, forest=forest, part_net=part_net)
@@ -337,9 +360,10 @@ def run_methods(
     forest : BodyPartForest, optional
         Shared by all methods. When None, the default model is loaded once here
         (if the package has one) and shared.
-    part_net : BodyPartNet or "none", optional
+    part_net : BodyPartNet, FacingNets or "none", optional
         The part net of the methods that label pixels with one (the trackers,
-        ``shotton-net``); when None the default model is loaded once here and shared.
+        ``shotton-net``, which labels as a pair's frontal net); when None the shipped
+        pair (``FacingNets.load_default()``) is loaded once here and shared.
     progress : bool
         Draw a progress bar on standard error.
     protocol : str, optional
@@ -505,11 +529,12 @@ def _default_forest() -> Any:
 
 
 def _default_part_net() -> Any:
-    """The shipped part net, or "none" (the forest labels) where it cannot be loaded."""
-    from posedrift.labelling import BodyPartNet
+    """The shipped part nets (frontal and turned), or "none" (the forest labels) where
+    they cannot be loaded."""
+    from posedrift.labelling import FacingNets
 
     try:
-        return BodyPartNet.load_default()
+        return FacingNets.load_default()
     except ValueError:
         return "none"
 
@@ -714,7 +739,7 @@ def evaluate(
         Default ``("cpd", "shotton", "pda", "icp")``; see :data:`METHODS`.
     forest : BodyPartForest, optional
         Shared by all methods (the default model, loaded once, when None).
-    part_net : BodyPartNet or "none", optional
+    part_net : BodyPartNet, FacingNets or "none", optional
         Shared by the methods that label pixels with it (see :func:`run_methods`).
     progress : bool
         Progress bar on standard error.

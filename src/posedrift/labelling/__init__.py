@@ -2,12 +2,13 @@
 
 from posedrift.labelling._features import depth_features
 from posedrift.labelling._forest import BodyPartForest, PartPrediction
-from posedrift.labelling._net import BodyPartNet, fit_perceptron
+from posedrift.labelling._net import BodyPartNet, FacingNets, fit_perceptron
 from posedrift.labelling._votes import JointVotes, fit_joint_votes, joint_modes
 
 __all__: list[str] = [
     "BodyPartForest",
     "BodyPartNet",
+    "FacingNets",
     "JointVotes",
     "PartPrediction",
     "depth_features",

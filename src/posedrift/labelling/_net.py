@@ -53,10 +53,16 @@ FORMAT_VERSION = 1
 MAX_LAYERS = 16
 """Most layers a model file may hold."""
 
-_DEFAULT_MODEL = "part_net_default.npz"
+_DEFAULT_MODELS = {"frontal": "part_net_default.npz", "turned": "part_net_turned.npz"}
+"""The shipped nets: trained on views within 45 (and 30% up to 100) degrees of frontal,
+and on views turned any way (``--wide-share 1 --wide-yaw 180``)."""
+_TRAIN_COMMANDS = {
+    "frontal": "posedrift train --classifier net",
+    "turned": "posedrift train --classifier net --wide-share 1 --wide-yaw 180",
+}
 _KEYS = ("part_names", "metadata", "reference_focal", "background", "clip", "offsets", "n_layers")
 """What a model file holds besides its format, version and layers."""
-_LOADED_DEFAULT: list = []  # the default model, once loaded
+_LOADED_DEFAULTS: dict[str, BodyPartNet] = {}  # the shipped models, once loaded
 _BLOCK = 4096  # pixels per block at inference: bounds the hidden activations' memory
 
 
@@ -269,17 +275,31 @@ class BodyPartNet:
         return cls._from_bytes(read_model_file(path, "body-part net"), str(Path(path)))
 
     @classmethod
-    def load_default(cls) -> BodyPartNet:
-        """The model shipped with posedrift (``posedrift train --classifier net``).
+    def load_default(cls, views: str = "frontal") -> BodyPartNet:
+        """A model shipped with posedrift.
 
         Loaded once per process and shared: the model is immutable.
+
+        Parameters
+        ----------
+        views : {"frontal", "turned"}
+            ``"frontal"``: trained on people facing the camera (within 45 degrees,
+            and a third of the frames up to 100), the net that labels the tracker's
+            pixels; ``"turned"``: trained on people turned any way, up to their back
+            to the camera, which the tracker asks once its skeleton has turned away
+            (:class:`FacingNets`). On the real recordings, all facing the camera,
+            the turned net reads many front views as back views (docs/RESULTS.md).
         """
-        if not _LOADED_DEFAULT:
-            data = read_packaged_model(
-                _DEFAULT_MODEL, "body-part net", "posedrift train --classifier net"
+        if views not in _DEFAULT_MODELS:
+            raise ValueError(
+                f"The 'views' parameter of BodyPartNet.load_default must be one of "
+                f"{sorted(_DEFAULT_MODELS)}. Got {views!r} instead."
             )
-            _LOADED_DEFAULT.append(cls._from_bytes(data, f"posedrift/data/{_DEFAULT_MODEL}"))
-        return _LOADED_DEFAULT[0]
+        if views not in _LOADED_DEFAULTS:
+            name = _DEFAULT_MODELS[views]
+            data = read_packaged_model(name, "body-part net", _TRAIN_COMMANDS[views])
+            _LOADED_DEFAULTS[views] = cls._from_bytes(data, f"posedrift/data/{name}")
+        return _LOADED_DEFAULTS[views]
 
     @classmethod
     def _from_bytes(cls, data: bytes, where: str) -> BodyPartNet:
@@ -321,6 +341,83 @@ class BodyPartNet:
             )
         except ValueError as exc:
             raise ValueError(f"{prefix} is invalid: {exc}") from exc
+
+
+@dataclass(frozen=True, eq=False)
+class FacingNets:
+    """Two body-part nets, one chosen by which way the person faces the camera.
+
+    Beyond the paper. A net trained on frontal views labels a person seen from
+    behind as their mirror image; one trained on every view also reads real people
+    who face the camera as seen from behind (docs/RESULTS.md). The tracker therefore
+    asks ``frontal`` while its last skeleton faces the camera, and ``turned`` once
+    that skeleton has turned more than ``turn_gate`` degrees away
+    (:func:`posedrift.skeleton.facing_yaw`). Where nothing tells which way the
+    person faces (a per-frame method, the first frame), it labels as ``frontal``.
+
+    Parameters
+    ----------
+    frontal, turned : BodyPartNet
+        Or anything with the net's ``predict`` and ``predict_pixels``.
+    turn_gate : float
+        Degrees in [0, 180].
+
+    Examples
+    --------
+    >>> nets = FacingNets.load_default()
+    >>> nets.select(10.0) is nets.frontal, nets.select(120.0) is nets.turned
+    (True, True)
+    >>> nets.select(float("nan")) is nets.frontal  # no skeleton to tell
+    True
+    """
+
+    frontal: Any
+    turned: Any
+    turn_gate: float = 45.0
+
+    def __post_init__(self) -> None:
+        gate = check_scalar(
+            self.turn_gate,
+            "turn_gate",
+            low=0.0,
+            high=180.0,
+            include_low=True,
+            include_high=True,
+            caller="FacingNets",
+        )
+        object.__setattr__(self, "turn_gate", float(gate))
+
+    @classmethod
+    def load_default(cls, turn_gate: float = 45.0) -> FacingNets:
+        """The shipped frontal and turned nets (:meth:`BodyPartNet.load_default`)."""
+        return cls(
+            BodyPartNet.load_default("frontal"),
+            BodyPartNet.load_default("turned"),
+            turn_gate=turn_gate,
+        )
+
+    def select(self, facing_yaw: float | None) -> Any:
+        """The net for a person turned ``facing_yaw`` degrees away (None, NaN: frontal)."""
+        if facing_yaw is not None and facing_yaw > self.turn_gate:  # NaN compares False
+            return self.turned
+        return self.frontal
+
+    def predict(
+        self, depth: np.ndarray, mask: np.ndarray | None, intrinsics: Intrinsics
+    ) -> PartPrediction:
+        """``frontal``'s :meth:`BodyPartNet.predict`."""
+        return self.frontal.predict(depth, mask, intrinsics)
+
+    def predict_pixels(
+        self,
+        depth: np.ndarray,
+        pixels: np.ndarray,
+        intrinsics: Intrinsics,
+        *,
+        mask: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """``frontal``'s :meth:`BodyPartNet.predict_pixels`."""
+        return self.frontal.predict_pixels(depth, pixels, intrinsics, mask=mask)
 
 
 def _validate(offsets, weights, biases, clip, reference_focal):

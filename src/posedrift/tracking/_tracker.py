@@ -8,7 +8,8 @@ beyond the paper: it stops the labels drifting; ``appearance_weight=0`` is the
 paper's pure tracking); relabel by geodesic reach from the part joints
 (Algorithm 2); mean-shift part modes; fit the skeleton with the calibrated bone
 lengths; judge the track's health, and re-initialize from the per-pixel labels
-when it is lost. The per-pixel labels come from the body-part net (beyond the paper;
+when it is lost. The per-pixel labels come from the body-part nets (beyond the paper:
+a frontal one, and one for a person turned away that the track's own facing calls in;
 ``part_net="none"`` gives the body-part forest's), the joint votes from the forest.
 """
 
@@ -29,6 +30,7 @@ from posedrift.camera._frame import MAX_PERSON_DEPTH
 from posedrift.labelling._relabel import geodesic_graph, relabel
 from posedrift.points._downsample import downsample
 from posedrift.points._segment import BackgroundModel, segment_person
+from posedrift.skeleton._angles import facing_yaw
 from posedrift.skeleton._fit import (
     VOTED_JOINTS,
     SkeletonFit,
@@ -184,16 +186,18 @@ class PoseTracker:
         upright person facing the camera from body proportions alone
         (:func:`posedrift.tracking._init.geometric_labels`). Its leaves cast the
         joint votes (``vote_weights``); it labels pixels where there is no part net.
-    part_net : BodyPartNet or "none", optional
+    part_net : BodyPartNet, FacingNets or "none", optional
         The per-pixel part probabilities (the appearance evidence fused every frame,
         the labels of (re)initialization frames and the judge of a failed track),
         beyond the paper: a perceptron over depth-comparison features that labels
-        pixels more accurately than the forest (docs/RESULTS.md). When None, the
-        shipped net (``BodyPartNet.load_default()``, loaded lazily) if ``forest`` is
-        None too, else the given forest labels, as before there was a net.
-        ``"none"`` (also the fallback where no net can be loaded) leaves the labels
-        to the forest, as in the paper. Any object with the net's ``predict_pixels``
-        works.
+        pixels more accurately than the forest (docs/RESULTS.md). A
+        :class:`~posedrift.labelling.FacingNets` pair labels with its frontal net
+        while the last skeleton faces the camera and with its turned net once that
+        skeleton has turned away beyond its ``turn_gate``. When None, the shipped
+        pair (``FacingNets.load_default()``, loaded lazily) if ``forest`` is None
+        too, else the given forest labels, as before there was a net. ``"none"``
+        (also the fallback where no net can be loaded) leaves the labels to the
+        forest, as in the paper. Any object with the net's ``predict_pixels`` works.
     relabel : bool
         Apply Algorithm 2 (geodesic relabelling) every frame.
     registration : {"nonrigid", "rigid"}
@@ -417,8 +421,8 @@ class PoseTracker:
         self.forest = forest
         if isinstance(part_net, str) and part_net != "none":
             raise ValueError(
-                f"The 'part_net' parameter of {caller} must be a BodyPartNet, 'none' or "
-                f"None. Got {part_net!r} instead."
+                f"The 'part_net' parameter of {caller} must be a BodyPartNet, a FacingNets, "
+                f"'none' or None. Got {part_net!r} instead."
             )
         if part_net is None and forest is not None:
             part_net = "none"  # a forest of one's own labels, as before there was a net
@@ -951,16 +955,20 @@ class PoseTracker:
         return self.forest
 
     def _get_labeller(self):
-        """What labels pixels: the part net (loaded on first use) or else the forest."""
+        """What labels pixels this frame: the part net (loaded on first use; of a
+        :class:`FacingNets` pair, the one for the last skeleton's facing) or else the forest."""
         if self.part_net is None:
             try:
-                from posedrift.labelling import BodyPartNet
+                from posedrift.labelling import FacingNets
 
-                self.part_net = BodyPartNet.load_default()
+                self.part_net = FacingNets.load_default()
             except (OSError, ValueError, ImportError, AttributeError):
                 self.part_net = "none"
         if isinstance(self.part_net, str):
             return self._get_forest()
+        if hasattr(self.part_net, "select"):
+            last = self._last_joints
+            return self.part_net.select(None if last is None else float(facing_yaw(last)))
         return self.part_net
 
     def _initialize(self, depth, intr, mask, full, pixels, points, graph) -> _Attempt | None:
