@@ -5,10 +5,11 @@
 Metadata lives in ``pyproject.toml``; this file only declares the C extensions (CPD's
 fused E-step in float64 and float32, its low-rank M-step, its EM loop and its label transfer;
 relabelling's k-NN graph and Dijkstra, the forest's per-point descent and its joint votes'
-casting; the grouped mean shift of the part modes and the votes; the segmentation's
-connected components and the downsampling's voxel centroids). They use the plain buffer protocol (no NumPy C API), so NumPy
-is not a build requirement. Each is optional: when one cannot be compiled the install
-still succeeds and posedrift falls back to its NumPy twins.
+casting, the part nets' feature matrix; the grouped mean shift of the part modes and the
+votes; the segmentation's connected components and the downsampling's voxel centroids).
+They use the plain buffer protocol (no NumPy C API), so NumPy is not a build requirement.
+Each is optional: when one cannot be compiled the install still succeeds and posedrift
+falls back to its NumPy twins.
 """
 
 from setuptools import Extension, setup
