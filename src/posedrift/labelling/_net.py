@@ -54,8 +54,8 @@ MAX_LAYERS = 16
 """Most layers a model file may hold."""
 
 _DEFAULT_MODELS = {"frontal": "part_net_default.npz", "turned": "part_net_turned.npz"}
-"""The shipped nets: trained on views within 45 (and 30% up to 100) degrees of frontal,
-and on views turned any way (``--wide-share 1 --wide-yaw 180``)."""
+"""The shipped nets: trained on views within 45 (30% of them up to 100) degrees of
+frontal, and on views turned any way (``--wide-share 1 --wide-yaw 180``)."""
 _TRAIN_COMMANDS = {
     "frontal": "posedrift train --classifier net",
     "turned": "posedrift train --classifier net --wide-share 1 --wide-yaw 180",
@@ -284,11 +284,12 @@ class BodyPartNet:
         ----------
         views : {"frontal", "turned"}
             ``"frontal"``: trained on people facing the camera (within 45 degrees,
-            and a third of the frames up to 100), the net that labels the tracker's
+            and 30% of the frames up to 100), the net that labels the tracker's
             pixels; ``"turned"``: trained on people turned any way, up to their back
             to the camera, which the tracker asks once its skeleton has turned away
-            (:class:`FacingNets`). On the real recordings, all facing the camera,
-            the turned net reads many front views as back views (docs/RESULTS.md).
+            (:class:`FacingNets`). The turned net labels people who face the camera
+            less well than the frontal one (0.83 against 0.94 of held-out pixels,
+            docs/RESULTS.md).
         """
         if views not in _DEFAULT_MODELS:
             raise ValueError(
