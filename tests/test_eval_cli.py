@@ -11,7 +11,7 @@ import posedrift.evaluation._harness as harness
 from posedrift.camera import DepthFrame, backproject, camera_preset
 from posedrift.cli import app
 from posedrift.evaluation import EvaluationSequence, Reference, evaluate, parse_methods
-from posedrift.skeleton import ANGLE_NAMES, JOINT_NAMES, joint_angles, t_pose_joints
+from posedrift.skeleton import ANGLE_NAMES, JOINT_NAMES, facing_yaw, joint_angles, t_pose_joints
 from posedrift.tracking import FrameResult, FrameStatus
 
 METHOD_KEYS = {
@@ -224,6 +224,7 @@ def test_eval_synthetic_cli_schema_and_skip(mocap_dir, tmp_path, monkeypatch):
         "distance",
         "in_place",
         "there_and_back",
+        "facing",
         "body",
         "skipped",
     }
@@ -700,6 +701,27 @@ def test_eval_synthetic_in_a_room_with_another_camera(tmp_path, monkeypatch):
     ):
         result = CliRunner().invoke(app, [*args, *bad])
         assert result.exit_code == 2 and option in result.output
+
+
+def test_eval_synthetic_turns_the_person_away(tmp_path, monkeypatch):
+    import posedrift.synthetic as synthetic
+
+    build = synthetic.build_sequence
+    built = []
+
+    def spy(*args, **kwargs):
+        built.append(build(*args, **kwargs))
+        return built[-1]
+
+    monkeypatch.setattr(synthetic, "build_sequence", spy)
+    out = tmp_path / "back.json"
+    args = ["-q", "eval", "synthetic", "builtin", "--frames", "2", "--methods", "pda"]
+    result = CliRunner().invoke(app, [*args, "--facing", "180", "--json", str(out)])
+    assert result.exit_code == 0, result.output
+    assert json.loads(out.read_text())["facing"] == 180.0
+    assert abs(facing_yaw(built[0].reference.joints[0]) - 180.0) < 1.0
+    result = CliRunner().invoke(app, [*args, "--facing", "400"])
+    assert result.exit_code == 2 and "--facing" in result.output
 
 
 # --- repeats: the trackers run with several point-sampling seeds ------------------------------

@@ -9,7 +9,14 @@ import pytest
 
 from posedrift.camera import CameraPose, DepthFrame, Intrinsics, camera_preset, project
 from posedrift.evaluation import EvaluationSequence
-from posedrift.skeleton import ANGLE_NAMES, JOINT_INDEX, JOINT_NAMES, PART_INDEX, t_pose_joints
+from posedrift.skeleton import (
+    ANGLE_NAMES,
+    JOINT_INDEX,
+    JOINT_NAMES,
+    PART_INDEX,
+    facing_yaw,
+    t_pose_joints,
+)
 from posedrift.synthetic import (
     BodyModel,
     Motion,
@@ -174,6 +181,7 @@ def test_place_camera_looks_level_at_the_pelvis():
         ({"n_frames": 0}, "'n_frames'"),
         ({"distance": -1.0}, "'distance'"),
         ({"rng": "x"}, "'rng'"),
+        ({"facing": 400.0}, "'facing'"),
     ],
 )
 def test_build_sequence_errors_name_the_argument(body, kwargs, match):
@@ -346,3 +354,22 @@ def test_in_place_keeps_a_walking_person_in_view_with_the_same_angles(body):
     own_step = base.joints[-1, JOINT_INDEX["torso"], 2] - base.joints[0, JOINT_INDEX["torso"], 2]
     # without it, they walk up to the camera
     assert walked[0] - walked[-1] == pytest.approx(2.4 + own_step, abs=1e-6)
+
+
+@pytest.mark.parametrize("facing", [90.0, 180.0, -90.0])
+def test_facing_turns_the_person_not_the_angles(body, sequence, facing):
+    turned = build_sequence(_arms_down_motion(), body=body, facing=facing)
+    np.testing.assert_allclose(turned.reference.angles, sequence.reference.angles, atol=1e-9)
+    joints = turned.reference.joints[0]
+    assert facing_yaw(joints) == pytest.approx(abs(facing), abs=1.0)
+    # Turned to their left (+90) the person shows the camera their right side.
+    right, left = joints[JOINT_INDEX["right_hip"], 2], joints[JOINT_INDEX["left_hip"], 2]
+    if facing == 90.0:
+        assert right < left - 0.15
+    elif facing == -90.0:
+        assert left < right - 0.15
+    # The camera still looks at the same person from the same distance.
+    pelvis = 0.5 * (joints[JOINT_INDEX["left_hip"]] + joints[JOINT_INDEX["right_hip"]])
+    front = sequence.reference.joints[0]
+    front_pelvis = 0.5 * (front[JOINT_INDEX["left_hip"]] + front[JOINT_INDEX["right_hip"]])
+    np.testing.assert_allclose(pelvis, front_pelvis, atol=0.02)

@@ -15,6 +15,7 @@ from posedrift.skeleton._fit import (
     LIMB_DIRECTION_WEIGHTS,
     N_PARTS,
     PART_RADII,
+    RING_BACK_RADII,
     RING_JOINTS,
     SEGMENT_RATIOS,
     SkeletonFit,
@@ -110,6 +111,58 @@ def test_fit_skeleton_from_true_labels_matches_ground_truth(rendered):
     assert np.percentile(errors, 90) < 15.0
     assert np.mean(joint_err) < 0.05  # metres
     assert np.mean(joint_err < 0.10) > 0.95
+
+
+@pytest.fixture(scope="module")
+def rendered_from_behind():
+    """The built-in motion with the person's back to the camera."""
+    from posedrift.synthetic import build_sequence, procedural_motion
+
+    return build_sequence(procedural_motion(), n_frames=150, rng=0, facing=180.0)
+
+
+def test_fit_skeleton_seen_from_behind_needs_the_back_radii(rendered_from_behind):
+    """From behind, the hip and knee boundaries lie elsewhere on the body: the front's
+    push-back radii put the hips 9 cm too deep and bend the legs by some 18 degrees."""
+    seq = rendered_from_behind
+    bones = _true_bones(seq.reference.joints[0])
+    hips = [J["right_hip"], J["left_hip"]]
+    results = {}
+    for facing in (None, 180.0):
+        errors, hip_err = [], []
+        for i in range(0, 150, 10):
+            points, labels = _frame_points(seq, i)
+            graph = geodesic_graph(points)
+            fit = fit_skeleton(
+                points, labels, bone_lengths=bones, edges=(graph.rows, graph.cols), facing=facing
+            )
+            errors.append(np.abs(joint_angles(fit.joints) - seq.reference.angles[i]))
+            hip_err.append(np.linalg.norm(fit.joints[hips] - seq.reference.joints[i][hips], axis=1))
+        results[facing] = np.array(errors), np.mean(hip_err)
+    errors, hip_err = results[180.0]
+    assert np.mean(errors) < 6.0 and np.mean(errors[:, 4:]) < 8.0  # degrees; legs last
+    assert hip_err < 0.05  # metres
+    front_errors, front_hip_err = results[None]
+    assert np.mean(front_errors[:, 4:]) > 12.0 and front_hip_err > 0.07
+
+
+def test_ring_joints_blend_the_back_radii_by_the_facing():
+    centres = np.full((N_PARTS, N_PARTS, 3), np.nan)
+    counts = np.zeros((N_PARTS, N_PARTS), dtype=int)
+    a, b = _P["head"], _P["upper_torso"]
+    centres[a, b] = centres[b, a] = [0.0, -0.5, 2.5]
+    counts[a, b] = counts[b, a] = 4
+
+    def distance(facing):
+        neck = ring_joints(centres, counts, height=1.75, facing=facing)["neck"][0]
+        return np.linalg.norm(neck - centres[a, b])
+
+    front, back = RING_JOINTS["neck"][2], RING_BACK_RADII["neck"]
+    # None and NaN (a facing that cannot be measured) mean seen from the front.
+    assert distance(None) == distance(0.0) == distance(float("nan"))
+    np.testing.assert_allclose([distance(0.0), distance(90.0), distance(180.0), distance(-180.0)],
+                               [front, 0.5 * (front + back), back, back], atol=1e-12)  # fmt: skip
+    assert set(RING_BACK_RADII) == set(RING_JOINTS)
 
 
 def test_fit_skeleton_falls_back_on_the_prediction(rendered):

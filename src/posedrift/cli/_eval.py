@@ -116,6 +116,14 @@ def eval_synthetic(
             "against last_100_deg).",
         ),
     ] = False,
+    facing: Annotated[
+        float,
+        typer.Option(
+            "--facing",
+            help="Degrees the person is turned from the camera at frame 0, to their left "
+            "(90 shows the right side, 180 the back; 0, facing the camera, is the protocol).",
+        ),
+    ] = 0.0,
     json_out: Annotated[
         Path | None, typer.Option("--json", help="Write the results (JSON) here.")
     ] = None,
@@ -173,6 +181,7 @@ def eval_synthetic(
     _check_range("--height", height, 0.5, 2.5)
     _check_range("--girth", girth, 0.0, None)
     _check_range("--distance", distance, 0.3, None)
+    _check_range("--facing", facing, -360.0, 360.0)
     _check_outputs(json_out, figures)
     placement = {} if distance is None else {"distance": distance}
     if camera is not None:
@@ -195,6 +204,7 @@ def eval_synthetic(
                 background=room,
                 in_place=in_place,
                 there_and_back=there_and_back,
+                facing=facing,
                 **placement,
                 shape=shape,
                 stature=height,
@@ -238,6 +248,7 @@ def eval_synthetic(
     report["distance"] = distance
     report["in_place"] = bool(in_place)
     report["there_and_back"] = bool(there_and_back)
+    report["facing"] = float(facing)
     report["body"] = {"height": height, "girth": girth}
     _finish(report, skipped, json_out, paper)
 

@@ -58,6 +58,29 @@ RING_JOINTS: dict[str, tuple[str, str, float]] = {
     "left_hip": ("lower_torso", "left_thigh", 0.1235),
 }
 
+# Push-back radii for a person seen from behind, at a 1.75 m stature. From behind, the
+# boundaries lie elsewhere on the body: on the body model with true labels, the hip's
+# boundary (the fold of the buttocks) is 33 mm in front of the joint against 95 mm from
+# the front, the knee's (its hollow) 52 against 18 mm, the elbow's 17 against 34 mm.
+# Each radius above is shifted by that difference, measured on the forest's training
+# clips (scripts/measure_ring_offsets.py); a turned person gets a blend (ring_joints'
+# ``facing``).
+RING_BACK_RADII: dict[str, float] = {
+    "neck": 0.058,
+    "right_elbow": 0.029,
+    "left_elbow": 0.029,
+    "right_hand": 0.028,
+    "left_hand": 0.028,
+    "right_knee": 0.059,
+    "left_knee": 0.059,
+    "right_foot": 0.033,
+    "left_foot": 0.033,
+    "right_shoulder": 0.052,
+    "left_shoulder": 0.052,
+    "right_hip": 0.062,
+    "left_hip": 0.062,
+}
+
 # Radius (metres) by which a part's visible surface lies in front of its axis.
 PART_RADII = np.array(
     [0.091, 0.117, 0.117, 0.0455, 0.0455, 0.039, 0.039, 0.026, 0.026, 0.078, 0.078]
@@ -320,17 +343,26 @@ _RING_NAMES = tuple(RING_JOINTS)
 _RING_A = np.array([_P[a] for a, _, _ in RING_JOINTS.values()])
 _RING_B = np.array([_P[b] for _, b, _ in RING_JOINTS.values()])
 _RING_RADII = np.array([r for _, _, r in RING_JOINTS.values()])
+_RING_BACK_RADII = np.array([RING_BACK_RADII[name] for name in RING_JOINTS])
 
 
 def ring_joints(
-    centres: np.ndarray, counts: np.ndarray, *, height: float, min_edges: int = 2
+    centres: np.ndarray,
+    counts: np.ndarray,
+    *,
+    height: float,
+    min_edges: int = 2,
+    facing: float | None = None,
 ) -> dict[str, tuple[np.ndarray, float]]:
     """Joint estimates from part boundaries, corrected for where the boundaries lie.
 
     Boundaries lie on the visible surface: each is pushed back along its camera ray
-    by the limb's radius. The thigh/shank boundary sits below the knee, the
-    torso/thigh boundary below and inside the hip, the torso/upper-arm boundary
-    below the shoulder: fixed offsets (scaled by stature) move them onto the joints.
+    by the limb's radius (:data:`RING_JOINTS`; seen from behind, where the boundaries
+    lie elsewhere on the body, :data:`RING_BACK_RADII`: a person turned ``facing``
+    degrees away gets ``w = (1 - cos(facing)) / 2`` of the second). The thigh/shank
+    boundary sits below the knee, the torso/thigh boundary below and inside the hip,
+    the torso/upper-arm boundary below the shoulder: fixed offsets (scaled by
+    stature) move them onto the joints. ``facing`` None or NaN: seen from the front.
 
     Returns
     -------
@@ -341,7 +373,11 @@ def ring_joints(
     # All thirteen boundaries pushed back at once (unseen ones are NaN and dropped).
     edges = counts[_RING_A, _RING_B]
     seen = centres[_RING_A, _RING_B]
-    pushed = seen + (_RING_RADII * scale)[:, None] * _units(seen)
+    radii = _RING_RADII
+    if facing is not None and math.isfinite(facing):
+        behind = 0.5 * (1.0 - math.cos(math.radians(facing)))
+        radii = (1.0 - behind) * _RING_RADII + behind * _RING_BACK_RADII
+    pushed = seen + (radii * scale)[:, None] * _units(seen)
     support = np.minimum(1.0, edges / 4.0)
     raw = {_RING_NAMES[k]: (pushed[k], support[k]) for k in np.flatnonzero(edges >= min_edges)}
     out = dict(raw)
@@ -560,6 +596,7 @@ def fit_skeleton(
     shoulder_anchor: float = 0.3,
     shoulder_offset: np.ndarray | None = None,
     exits: np.ndarray | None = None,
+    facing: float | None = None,
 ) -> SkeletonFit:
     """Fit the 15-joint skeleton to labelled points with calibrated bone lengths.
 
@@ -607,6 +644,10 @@ def fit_skeleton(
         Where each part leaves the image (:func:`image_exits`; NaN for parts inside
         it): a limb whose part is cut off by the image's edge takes its direction on
         the visible surface (see ``_place_limbs``). None: no part is cut.
+    facing : float, optional
+        How far the person is turned from the camera, degrees
+        (:func:`posedrift.skeleton.facing_yaw` of the prediction, say): sets the
+        ring joints' push-back radii (:func:`ring_joints`). None: seen from the front.
 
     Returns
     -------
@@ -626,7 +667,7 @@ def fit_skeleton(
     pred = None if prediction is None else np.asarray(prediction, dtype=float)
     centres, ecounts = part_boundaries(points, labels, rows, cols)
     axes, elong = part_axes(points, labels, min_points=min_part_points)
-    ring = ring_joints(centres, ecounts, height=height, min_edges=min_edges)
+    ring = ring_joints(centres, ecounts, height=height, min_edges=min_edges, facing=facing)
 
     joints = np.full((15, 3), np.nan)
     conf = np.zeros(15)

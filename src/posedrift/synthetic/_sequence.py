@@ -87,6 +87,7 @@ def build_sequence(
     calibration: bool = True,
     in_place: bool = False,
     there_and_back: bool = False,
+    facing: float = 0.0,
     rng: int | np.random.Generator | None = None,
     name: str | None = None,
     on_frame: Callable[[int, int], None] | None = None,
@@ -145,6 +146,11 @@ def build_sequence(
         ``n_frames - 1 - t`` repeats the pose of frame ``t``. The drift protocol: the
         last frames are the first ones' poses, so any difference in error between
         them is the method's drift, not a harder end of the clip.
+    facing : float
+        Degrees the person is turned from the camera at frame 0, to their left (the
+        whole clip turned about the vertical through the frame-0 pelvis, before the
+        camera is placed): 0 faces the camera (the protocol), 90 shows the right side,
+        180 the back. Angles do not change.
     rng : int, numpy.random.Generator or None
         Seed or generator for the noise.
     name : str, optional
@@ -199,6 +205,10 @@ def build_sequence(
         clip = _scaled(clip, body, stature)
     if in_place:
         clip = _in_place(clip)
+    facing = check_scalar(facing, "facing", low=-360.0, high=360.0, include_low=True,
+                          include_high=True, caller=where)  # fmt: skip
+    if facing != 0.0:
+        clip = _turned(clip, facing)
     order = _frame_order(len(clip), n_frames, there_and_back)
     if n_frames is not None and len(order) < n_frames:
         logger.info(
@@ -286,6 +296,26 @@ def _in_place(clip: Motion) -> Motion:
         clip.fps,
         clip.name,
         {**dict(getattr(clip, "meta", {}) or {}), "in_place": True},
+    )
+
+
+def _turned(clip: Motion, degrees: float) -> Motion:
+    """The clip turned ``degrees`` to the person's left about the vertical through its
+    frame-0 pelvis (a person facing +Z then faces ``(sin, 0, cos)`` of the angle)."""
+    from posedrift.synthetic._motion import Motion, _yaw
+
+    centre = pelvis_centre(np.asarray(clip.joints[0], dtype=float)) * [1.0, 0.0, 1.0]
+    rotation = _yaw(np.radians(degrees))
+
+    def turn(points: np.ndarray) -> np.ndarray:
+        return (np.asarray(points, dtype=float) - centre) @ rotation.T + centre
+
+    return Motion(
+        turn(clip.joints),
+        {key: turn(value) for key, value in (clip.extras or {}).items()},
+        clip.fps,
+        clip.name,
+        {**dict(getattr(clip, "meta", {}) or {}), "facing": float(degrees)},
     )
 
 

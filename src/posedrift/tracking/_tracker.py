@@ -16,6 +16,7 @@ a frontal one, and one for a person turned away that the track's own facing call
 from __future__ import annotations
 
 import copy
+import math
 import time
 import warnings
 from dataclasses import dataclass, replace
@@ -135,6 +136,11 @@ def _carry_joints(joints: np.ndarray, source: np.ndarray, moved: np.ndarray, fie
     trust = np.clip((_FIELD_IGNORED - gap) / (_FIELD_IGNORED - _FIELD_TRUSTED), 0.0, 1.0)
     blended = trust[:, None] * warped + (1.0 - trust[:, None]) * rigid
     return np.where(np.isfinite(warped), blended, rigid)
+
+
+def _facing(joints: np.ndarray) -> float:
+    """The facing yaw of a skeleton in degrees (NaN where it is incomplete)."""
+    return float(facing_yaw(joints)) if np.isfinite(joints).all() else math.nan
 
 
 def _units_hint(depth: np.ndarray) -> str:
@@ -890,6 +896,7 @@ class PoseTracker:
             smoothing=self.temporal_smoothing,
             shoulder_offset=cal.shoulders,
             exits=self._image_exits(points, labels),
+            facing=None if prediction is None else _facing(prediction),
             **unanchored,
         )
         in_view = self._in_view(fit.joints)
