@@ -60,6 +60,12 @@ done
 # A person too near the camera (1.6 m: head and feet cut off by the image's edges).
 posedrift -q eval synthetic builtin "$M/cmu/007_03.bvh" "$M/cmu/007_05.bvh" "$M/cmu/002_07.bvh" \
     --frames 300 --distance 1.6 --methods "$methods" --json "$out/near.json" | tee "$out/near.md"
+# A person who starts turned away: side-on (90 degrees, their right side to the camera) and
+# with their back to it (180); the protocol's person starts facing the camera.
+for f in 90 180; do
+    posedrift -q eval synthetic builtin "$M/cmu/007_03.bvh" --frames 300 --facing "$f" \
+        --methods "$methods,shotton-net" --json "$out/facing_$f.json" | tee "$out/facing_$f.md"
+done
 # Real Kinect recordings: one sequence per action, subject (a mod 4) + 1, trial 1.
 seqs=$(for a in $(seq 1 27); do printf "a%d_s%d_t1," "$a" $(( a % 4 + 1 )); done)
 posedrift -q eval utd "$data/utd-mhad" --sequences "${seqs%,}" --methods "$wide" \
