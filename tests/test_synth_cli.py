@@ -9,7 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 from posedrift.cli import app
-from posedrift.skeleton import ANGLE_NAMES, JOINT_NAMES
+from posedrift.skeleton import ANGLE_NAMES, JOINT_NAMES, facing_yaw
 from posedrift.synthetic import read_synthetic
 
 runner = CliRunner()
@@ -114,6 +114,7 @@ def test_synth_a_bvh_clip(mocap_dir, tmp_path):
         (["--height", "-1"], "--height must be in (0.5, 2.5). Got -1."),
         (["--distance", "0"], "--distance must be greater than 0. Got 0."),
         (["--fps", "-30"], "--fps must be greater than 0. Got -30."),
+        (["--facing", "400"], "--facing must be in (-360, 360). Got 400."),
         (["--size", "640x480"], "--size 640x480 goes with --intrinsics: the camera preset"),
         (["--camera", "d435", "--size", "512x424"], "give --camera kinect2, or --intrinsics"),
     ],
@@ -124,6 +125,14 @@ def test_synth_bad_options_fail_clearly(tmp_path, args, message):
     assert message in result.stderr
     assert "'stature' parameter" not in result.output and "with_shape" not in result.output
     assert not (tmp_path / "x").exists()
+
+
+def test_synth_facing_turns_the_person_away(tmp_path):
+    out = tmp_path / "back"
+    result = _run("synth", "builtin", "--out", str(out), "--frames", "2", "--facing", "180")
+    assert result.exit_code == 0, result.output
+    joints = np.asarray(json.loads((out / "ground_truth.json").read_text())["frames"][0]["joints"])
+    assert abs(facing_yaw(joints) - 180.0) < 1.0
 
 
 def test_synth_size_matching_the_preset_is_accepted(tmp_path):

@@ -73,6 +73,14 @@ def synth(
     background: Annotated[
         bool, typer.Option("--background/--no-background", help="Render a floor and back wall.")
     ] = False,
+    facing: Annotated[
+        float,
+        typer.Option(
+            "--facing",
+            help="Degrees the person is turned from the camera at frame 0, to their left "
+            "(90 shows the right side, 180 the back; 0 faces the camera).",
+        ),
+    ] = 0.0,
     height: Annotated[
         float | None,
         typer.Option(
@@ -110,6 +118,7 @@ def synth(
         ("--girth", girth, 0.0, None),
         ("--distance", distance, 0.0, None),
         ("--fps", fps, 0.0, None),
+        ("--facing", facing, -360.0, 360.0),
     ):
         _check_range(option, value, low, high)
     check_output_dir(out, "--out")
@@ -143,6 +152,7 @@ def synth(
                 shape=shape,
                 stature=height,
                 in_place=in_place,
+                facing=facing,
                 rng=seed,
                 on_frame=on_frame,
             )
