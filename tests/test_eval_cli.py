@@ -669,17 +669,23 @@ def test_eval_synthetic_renders_the_body_asked_for(tmp_path, monkeypatch):
         assert result.exit_code == 2 and option in result.output
 
 
-def test_eval_synthetic_in_a_room_with_another_camera(tmp_path, monkeypatch):
+@pytest.fixture
+def built(monkeypatch):
+    """The sequences ``eval synthetic`` builds, in order, kept for the test to look at."""
     import posedrift.synthetic as synthetic
 
     build = synthetic.build_sequence
-    built = []
+    sequences = []
 
     def spy(*args, **kwargs):
-        built.append(build(*args, **kwargs))
-        return built[-1]
+        sequences.append(build(*args, **kwargs))
+        return sequences[-1]
 
     monkeypatch.setattr(synthetic, "build_sequence", spy)
+    return sequences
+
+
+def test_eval_synthetic_in_a_room_with_another_camera(tmp_path, built):
     out = tmp_path / "room.json"
     args = ["-q", "eval", "synthetic", "builtin", "--frames", "4", "--methods", "cpd,shotton"]
     camera = ["--camera", "d435", "--distance", "2.0"]
@@ -703,17 +709,7 @@ def test_eval_synthetic_in_a_room_with_another_camera(tmp_path, monkeypatch):
         assert result.exit_code == 2 and option in result.output
 
 
-def test_eval_synthetic_turns_the_person_away(tmp_path, monkeypatch):
-    import posedrift.synthetic as synthetic
-
-    build = synthetic.build_sequence
-    built = []
-
-    def spy(*args, **kwargs):
-        built.append(build(*args, **kwargs))
-        return built[-1]
-
-    monkeypatch.setattr(synthetic, "build_sequence", spy)
+def test_eval_synthetic_turns_the_person_away(tmp_path, built):
     out = tmp_path / "back.json"
     args = ["-q", "eval", "synthetic", "builtin", "--frames", "2", "--methods", "pda"]
     result = CliRunner().invoke(app, [*args, "--facing", "180", "--json", str(out)])
