@@ -37,7 +37,6 @@ from posedrift.skeleton._fit import RING_BACK_RADII, RING_JOINTS, part_boundarie
 from posedrift.synthetic import build_sequence, bvh_motion, procedural_motion
 
 _FRONT, _BACK = 0.0, 180.0
-_STATURE = 1.75  # RING_JOINTS' radii are given at this stature; the clips are near it
 
 
 def _point_labels(depth: np.ndarray, truth: np.ndarray, intrinsics, n_points: int, rng: int):
