@@ -160,8 +160,13 @@ def test_ring_joints_blend_the_back_radii_by_the_facing():
     front, back = RING_JOINTS["neck"][2], RING_BACK_RADII["neck"]
     # None and NaN (a facing that cannot be measured) mean seen from the front.
     assert distance(None) == distance(0.0) == distance(float("nan"))
-    np.testing.assert_allclose([distance(0.0), distance(90.0), distance(180.0), distance(-180.0)],
-                               [front, 0.5 * (front + back), back, back], atol=1e-12)  # fmt: skip
+    # Up to side-on the front radii; beyond, -cos(facing) of the way to the back ones.
+    w = np.sqrt(0.5)
+    np.testing.assert_allclose(
+        [distance(f) for f in (0.0, 60.0, 90.0, -90.0, 135.0, 180.0, -180.0)],
+        [front, front, front, front, (1 - w) * front + w * back, back, back],
+        atol=1e-12,
+    )
     assert set(RING_BACK_RADII) == set(RING_JOINTS)
 
 

@@ -63,8 +63,8 @@ RING_JOINTS: dict[str, tuple[str, str, float]] = {
 # boundary (the fold of the buttocks) is 33 mm in front of the joint against 95 mm from
 # the front, the knee's (its hollow) 52 against 18 mm, the elbow's 17 against 34 mm.
 # Each radius above is shifted by that difference, measured on the forest's training
-# clips (scripts/measure_ring_offsets.py); a turned person gets a blend (ring_joints'
-# ``facing``).
+# clips (scripts/measure_ring_offsets.py); a person turned beyond side-on gets a blend
+# (ring_joints' ``facing``).
 RING_BACK_RADII: dict[str, float] = {
     "neck": 0.058,
     "right_elbow": 0.029,
@@ -359,7 +359,7 @@ def ring_joints(
     Boundaries lie on the visible surface: each is pushed back along its camera ray
     by the limb's radius (:data:`RING_JOINTS`; seen from behind, where the boundaries
     lie elsewhere on the body, :data:`RING_BACK_RADII`: a person turned ``facing``
-    degrees away gets ``w = (1 - cos(facing)) / 2`` of the second). The thigh/shank
+    degrees away, beyond 90, gets ``w = -cos(facing)`` of the second). The thigh/shank
     boundary sits below the knee, the torso/thigh boundary below and inside the hip,
     the torso/upper-arm boundary below the shoulder: fixed offsets (scaled by
     stature) move them onto the joints. ``facing`` None or NaN: seen from the front.
@@ -375,7 +375,8 @@ def ring_joints(
     seen = centres[_RING_A, _RING_B]
     radii = _RING_RADII
     if facing is not None and math.isfinite(facing):
-        behind = 0.5 * (1.0 - math.cos(math.radians(facing)))
+        # From facing the camera to side-on the front radii; beyond, a blend to the back.
+        behind = max(0.0, -math.cos(math.radians(facing)))
         radii = (1.0 - behind) * _RING_RADII + behind * _RING_BACK_RADII
     pushed = seen + (radii * scale)[:, None] * _units(seen)
     support = np.minimum(1.0, edges / 4.0)
