@@ -20,6 +20,7 @@ from posedrift.skeleton._fit import (
     SEGMENT_RATIOS,
     SkeletonFit,
     _anchor_shoulders,
+    _place_limbs,
     bone_anchors,
     fit_skeleton,
     image_exits,
@@ -492,7 +493,11 @@ def _ref_fit_skeleton(
             to_mode = _ref_unit(modes_back[part] - anchor)
             if elong[part] >= min_elongation and np.isfinite(to_mode).all():
                 axis = axes[part]
-                direction = axis if axis @ to_mode >= 0 else -axis
+                towards = to_mode * np.linalg.norm(modes_back[part] - anchor)
+                far = ring[joint_name][0] - anchor if joint_name in ring else np.full(3, np.nan)
+                if np.isfinite(far).all():
+                    towards = towards + far
+                direction = axis if axis @ towards >= 0 else -axis
             else:
                 direction = to_mode
             if joint_name in ring and w_ring > 0:
@@ -680,3 +685,55 @@ def test_fast_fit_matches_the_original_on_random_clouds():
         joints = rng.normal(size=(15, 3))
         joints[rng.integers(0, 15)] = np.nan
         _assert_same(bone_anchors(joints, bones), _ref_bone_anchors(joints, bones))
+
+
+def _one_forearm(mode_offset: float, seen_wrist: bool):
+    """Inputs of ``_place_limbs`` with only the right forearm seen, running down-right.
+
+    Its principal axis points up-left (PCA's sign is arbitrary); its mode lies
+    ``mode_offset`` metres along the true direction from the elbow; the wrist's
+    ring joint, where seen, 25 cm along it.
+    """
+    true = np.array([1.0, -1.0, 0.0]) / np.sqrt(2.0)
+    elbow = np.array([0.2, 0.1, 2.0])
+    part = _P["right_forearm"]
+    joints = np.full((15, 3), np.nan)
+    joints[J["right_elbow"]] = elbow
+    modes = np.full((N_PARTS, 3), np.nan)
+    modes[part] = elbow + mode_offset * true
+    axes = np.full((N_PARTS, 3), np.nan)
+    axes[part] = -true
+    counts, elong = np.zeros(N_PARTS, dtype=int), np.zeros(N_PARTS)
+    counts[part], elong[part] = 30, 6.0
+    ring = {"right_hand": (elbow + 0.25 * true, 1.0)} if seen_wrist else {}
+    kwargs = dict(
+        bone_lengths=prior_bone_lengths(1.75),
+        counts=counts,
+        modes=modes,
+        modes_back=modes,
+        boundaries=np.full((N_PARTS, N_PARTS, 3), np.nan),
+        exits=np.full((N_PARTS, 3), np.nan),
+        axes=axes,
+        elong=elong,
+        ring=ring,
+        pred=None,
+        smoothing=0.0,
+        min_part_points=4,
+        min_elongation=3.0,
+    )
+    return joints, kwargs, elbow, true
+
+
+@pytest.mark.parametrize(
+    ("mode_offset", "seen_wrist"),
+    [(0.12, False), (0.12, True), (-0.035, True)],  # the last: a mode behind the elbow
+)
+def test_limb_axis_turns_towards_the_far_end_it_sees(mode_offset, seen_wrist):
+    joints, kwargs, elbow, true = _one_forearm(mode_offset, seen_wrist)
+    conf, measured = np.ones(15), np.ones(15, dtype=bool)
+    _place_limbs(joints, conf, measured, **kwargs)
+    hand = joints[J["right_hand"]]
+    length = kwargs["bone_lengths"][J["right_hand"]]
+    assert np.isclose(np.linalg.norm(hand - elbow), length, atol=1e-9)
+    assert np.linalg.norm(hand - (elbow + length * true)) < 1e-3  # within a millimetre
+    assert np.isnan(joints[J["left_hand"]]).all()  # unseen limbs are left alone

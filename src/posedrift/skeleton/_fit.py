@@ -418,6 +418,11 @@ def _units(v: np.ndarray) -> np.ndarray:
     return out
 
 
+def _finite_or_zero(v: np.ndarray) -> np.ndarray:
+    """``v (K, 3)`` with its rows that are not finite set to zero."""
+    return np.where(_rows_finite(v)[:, None], v, 0.0)
+
+
 def _rows_finite(v: np.ndarray) -> np.ndarray:
     """Whether each row of ``v (K, 3)`` is finite."""
     return np.isfinite(v).all(axis=1)
@@ -475,14 +480,20 @@ def _place_limbs(
         on_surface = _units(np.where(beyond[:, None], out, along))
         surface = cut & _rows_finite(on_surface)
         to_mode[surface] = on_surface[surface]
-    # The part's axis, turned towards its mode, where the part is elongated enough.
+    # The part's axis, where the part is elongated enough, turned towards the far end
+    # it sees: the offsets to its mode and to the ring joint at its far end, summed
+    # unnormalised so that the longer baseline decides. A mode a few centimetres from
+    # the anchor, on the wrong side of it after a poor labelling, would otherwise turn
+    # a forearm whose wrist is seen end for end.
     axis = axes[part]
     use_axis = live & (elong[part] >= min_elongation) & _rows_finite(to_mode)
-    facing = (axis * to_mode).sum(axis=1) >= 0  # the sign of axis @ to_mode
+    far = np.array([ring[name][0] if name in ring else _NAN3 for name in _LIMB_NAMES])
+    reach = np.linalg.norm(modes_back[part] - anchor, axis=1)
+    towards = _finite_or_zero(to_mode * reach[:, None]) + _finite_or_zero(far - anchor)
+    facing = (axis * towards).sum(axis=1) >= 0  # the sign of axis @ towards
     direction = np.where(use_axis[:, None], np.where(facing[:, None], axis, -axis), to_mode)
     direction[~live] = np.nan
     # Mixed with the direction to the ring joint at the limb's far end, where seen.
-    far = np.array([ring[name][0] if name in ring else _NAN3 for name in _LIMB_NAMES])
     to_ring = _units(far - anchor)
     mix = live & (_LIMB_W_RING[:, 0] > 0) & _rows_finite(to_ring)
     if mix.any():
@@ -604,8 +615,8 @@ def fit_skeleton(
     Ring joints (neck, elbows, knees, and where seen wrists, ankles, shoulders and
     hips) come from part boundaries (:func:`ring_joints`). Each limb bone starts at
     its elbow or knee and follows a direction that mixes the part's principal axis
-    (oriented towards its mode) and the direction to the ring joint at its other
-    end (:data:`LIMB_DIRECTION_WEIGHTS`), for exactly its calibrated length. The
+    (oriented towards its mode and its far ring joint) and the direction to that
+    ring joint (:data:`LIMB_DIRECTION_WEIGHTS`), for exactly its calibrated length. The
     shoulders are then pulled towards where the trunk puts them (``shoulder_anchor``).
 
     Parameters
