@@ -12,7 +12,8 @@ camera. This renders clips facing the camera and turned away from it
 (``build_sequence(facing=180)``), labels the downsampled points with their *true* parts,
 and prints, per ring joint, the median distance along the ray from the boundary's centre
 to the true joint, front and back, with the back radius that distance implies: the front
-radius shifted by the difference, at a 1.75 m stature (the clips' scale). It reads ground
+radius shifted by the difference, at a 1.75 m stature (the clips' scale); and for the
+elbows and knees the distance down the limb (``ELBOW_BOUNDARY_SHIFT``). It reads ground
 truth, so it lives here and not in the method.
 
 The default clips are among those the forest trains on and none of the held-out ones
@@ -37,6 +38,12 @@ from posedrift.skeleton._fit import RING_BACK_RADII, RING_JOINTS, part_boundarie
 from posedrift.synthetic import build_sequence, bvh_motion, procedural_motion
 
 _FRONT, _BACK = 0.0, 180.0
+# Joints whose boundary also lies along the limb: measured from the joint named here.
+_DOWN_THE_LIMB = {
+    f"{side}_{joint}": f"{side}_{parent}"
+    for side in ("right", "left")
+    for joint, parent in (("elbow", "shoulder"), ("knee", "hip"))
+}
 
 
 def _point_labels(depth: np.ndarray, truth: np.ndarray, intrinsics, n_points: int, rng: int):
@@ -69,7 +76,12 @@ def ray_offsets(motion, facing: float, *, frames: int, every: int, n_points: int
                 continue
             centre = centres[pa, pb]
             ray = centre / np.linalg.norm(centre)
-            offsets[name].append(float((joints[JOINT_INDEX[name]] - centre) @ ray))
+            joint = joints[JOINT_INDEX[name]]
+            offsets[name].append(float((joint - centre) @ ray))
+            if name in _DOWN_THE_LIMB:  # How far the joint lies beyond its boundary.
+                bone = joint - joints[JOINT_INDEX[_DOWN_THE_LIMB[name]]]
+                down = float((joint - centre) @ bone) / np.linalg.norm(bone)
+                offsets[f"{name} down"].append(down)
     return offsets
 
 
@@ -111,6 +123,15 @@ def main() -> None:
         implied = radius + 1e-3 * (back - front)
         print(f"{kind:10s} {front:9.0f} {back:8.0f} {radius:7.4f} {implied:13.4f} "
               f"{RING_BACK_RADII[name]:7.3f}")  # fmt: skip
+    print("\nDown the limb, from the boundary's centre to the joint (mm; front, back): "
+          "the elbow's is ELBOW_BOUNDARY_SHIFT, the knee's the offset in ring_joints.")  # fmt: skip
+    for name in ("right_elbow", "right_knee"):
+        names = {f"{name} down", f"{name} down".replace("right_", "left_")}
+        front, back = (
+            1e3 * np.median([v for n in names for v in pooled[view][n]] or [np.nan])
+            for view in (_FRONT, _BACK)
+        )
+        print(f"{name.removeprefix('right_'):10s} {front:9.0f} {back:8.0f}")
 
 
 if __name__ == "__main__":

@@ -12,6 +12,8 @@ from posedrift.skeleton._fit import (
     _J,
     _LIMBS,
     _P,
+    ELBOW_BOUNDARY_SHIFT,
+    ELBOW_FULL_SHIFT_BEND,
     LIMB_DIRECTION_WEIGHTS,
     N_PARTS,
     PART_RADII,
@@ -389,7 +391,12 @@ def _ref_push(p: np.ndarray, radius: float) -> np.ndarray:
 
 
 def _ref_ring_joints(
-    centres: np.ndarray, counts: np.ndarray, *, height: float, min_edges: int = 2
+    centres: np.ndarray,
+    counts: np.ndarray,
+    *,
+    height: float,
+    min_edges: int = 2,
+    elbow_shift: float = 0.0,
 ) -> dict[str, tuple[np.ndarray, float]]:
     scale = height / 1.75
     raw = {}
@@ -398,6 +405,18 @@ def _ref_ring_joints(
         if counts[a, b] >= min_edges:
             raw[name] = (_ref_push(centres[a, b], radius * scale), min(1.0, counts[a, b] / 4.0))
     out = dict(raw)
+    for side in ("right", "left"):
+        elbow, shoulder = raw.get(f"{side}_elbow"), raw.get(f"{side}_shoulder")
+        if elbow_shift and elbow is not None and shoulder is not None:
+            down = _ref_unit(elbow[0] - shoulder[0])
+            share = 1.0
+            if f"{side}_hand" in raw:
+                cos = np.clip(down @ _ref_unit(raw[f"{side}_hand"][0] - elbow[0]), -1, 1)
+                bend = np.degrees(np.arccos(cos))
+                share = min(1.0, bend / ELBOW_FULL_SHIFT_BEND) if np.isfinite(bend) else 1.0
+            down = share * elbow_shift * scale * down
+            if np.isfinite(down).all():
+                out[f"{side}_elbow"] = (elbow[0] + down, elbow[1])
     for side, other in (("right", "left"), ("left", "right")):
         knee, hip = raw.get(f"{side}_knee"), raw.get(f"{side}_hip")
         if knee is not None and hip is not None:
@@ -453,7 +472,9 @@ def _ref_fit_skeleton(
     pred = None if prediction is None else np.asarray(prediction, dtype=float)
     centres, ecounts = _ref_part_boundaries(points, labels, rows, cols)
     axes, elong = _ref_part_axes(points, labels, min_points=min_part_points)
-    ring = _ref_ring_joints(centres, ecounts, height=height, min_edges=min_edges)
+    ring = _ref_ring_joints(
+        centres, ecounts, height=height, min_edges=min_edges, elbow_shift=ELBOW_BOUNDARY_SHIFT
+    )
 
     joints = np.full((15, 3), np.nan)
     conf = np.zeros(15)
@@ -647,10 +668,10 @@ def test_fast_fit_matches_the_original_bit_for_bit(rendered, seed):
             part_axes(points, labels, min_points=min_points),
             _ref_part_axes(points, labels, min_points=min_points),
         )
-    for min_edges in (1, 2, 6):
+    for min_edges, shift in ((1, 0.0), (2, 0.0), (6, 0.0), (2, 0.035)):
         _assert_same(
-            ring_joints(centres, counts, height=1.7, min_edges=min_edges),
-            _ref_ring_joints(centres, counts, height=1.7, min_edges=min_edges),
+            ring_joints(centres, counts, height=1.7, min_edges=min_edges, elbow_shift=shift),
+            _ref_ring_joints(centres, counts, height=1.7, min_edges=min_edges, elbow_shift=shift),
         )
     joints = fit_skeleton(points, labels, **options).joints
     for n in (1, 3):
@@ -737,3 +758,53 @@ def test_limb_axis_turns_towards_the_far_end_it_sees(mode_offset, seen_wrist):
     assert np.isclose(np.linalg.norm(hand - elbow), length, atol=1e-9)
     assert np.linalg.norm(hand - (elbow + length * true)) < 1e-3  # within a millimetre
     assert np.isnan(joints[J["left_hand"]]).all()  # unseen limbs are left alone
+
+
+def test_elbows_are_moved_off_their_boundary_down_the_arm(rendered):
+    # With true labels the upper-arm/forearm boundary lies a few centimetres up the
+    # upper arm once the arm bends; the fit's elbows are moved down the arm towards
+    # the joint, by less where the arm is nearly straight. (From frame 40, once the
+    # motion has left its T-pose, where the boundary is 5-10 mm from the elbow.)
+    bones = _true_bones(rendered.reference.joints[0])
+    at_boundary, fitted = [], []
+    for i in range(40, 150, 5):
+        points, labels = _frame_points(rendered, i)
+        graph = geodesic_graph(points)
+        truth = rendered.reference.joints[i]
+        centres, counts = part_boundaries(points, labels, graph.rows, graph.cols)
+        ring = ring_joints(centres, counts, height=1.75)
+        fit = fit_skeleton(points, labels, bone_lengths=bones, edges=(graph.rows, graph.cols))
+        for side in ("right", "left"):
+            elbow = truth[J[f"{side}_elbow"]]
+            down = elbow - truth[J[f"{side}_shoulder"]]
+            down /= np.linalg.norm(down)
+            if f"{side}_elbow" in ring:
+                at_boundary.append((ring[f"{side}_elbow"][0] - elbow) @ down)
+                fitted.append((fit.joints[J[f"{side}_elbow"]] - elbow) @ down)
+    assert len(fitted) >= 30
+    assert np.median(at_boundary) < -0.025  # the boundary: more than 2.5 cm up the arm
+    assert -0.02 < np.median(fitted) < 0.005  # the fit's elbow: within 2 cm, never past
+    assert np.median(fitted) - np.median(at_boundary) > 0.01  # at least 1 cm nearer
+
+
+def test_straight_arms_keep_their_elbows_at_the_boundary():
+    # A T-pose's arm: the boundary lies at the elbow, and the elbow stays there (within
+    # 3 mm, a tenth of the full shift: the push-back along each boundary's own ray bends
+    # the line a little).
+    centres = np.full((N_PARTS, N_PARTS, 3), np.nan)
+    counts = np.zeros((N_PARTS, N_PARTS), dtype=int)
+    for name, x in (("right_shoulder", 0.2), ("right_elbow", 0.45), ("right_hand", 0.7)):
+        a, b, _ = RING_JOINTS[name]
+        centres[_P[a], _P[b]] = centres[_P[b], _P[a]] = [x, 0.3, 2.5]
+        counts[_P[a], _P[b]] = counts[_P[b], _P[a]] = 6
+    still = ring_joints(centres, counts, height=1.75)["right_elbow"][0]
+    moved = ring_joints(centres, counts, height=1.75, elbow_shift=0.035)["right_elbow"][0]
+    assert np.linalg.norm(moved - still) < 0.003
+    # Bent at a right angle at the elbow: moved the full shift, away from the shoulder.
+    a, b, _ = RING_JOINTS["right_hand"]
+    centres[_P[a], _P[b]] = centres[_P[b], _P[a]] = [0.45, 0.05, 2.5]
+    still = ring_joints(centres, counts, height=1.75)["right_elbow"][0]
+    moved = ring_joints(centres, counts, height=1.75, elbow_shift=0.035)["right_elbow"][0]
+    assert 30.0 <= ELBOW_FULL_SHIFT_BEND <= 90.0
+    assert np.isclose(np.linalg.norm(moved - still), 0.035, atol=1e-9)
+    assert moved[0] > still[0]  # down the arm: further from the shoulder (x = 0.2)

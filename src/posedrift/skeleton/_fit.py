@@ -58,6 +58,20 @@ RING_JOINTS: dict[str, tuple[str, str, float]] = {
     "left_hip": ("lower_torso", "left_thigh", 0.1235),
 }
 
+# How far up the upper arm the upper-arm/forearm boundary lies from the elbow, at a 1.75 m
+# stature. On the body model with true labels the boundary's centre lies 27 mm up the arm
+# on the forest's training clips (scripts/measure_ring_offsets.py, "down the limb"), and
+# the pushed-back boundary joint 33 mm on the held-out walks, 40 on the development clips:
+# about 29 with the arm straight, 41-52 bent. The skeleton's fit moves its elbows that far
+# down the arm; the limb lengths are measured between the boundaries as they lie
+# (tracking's calibration), which gave the tracker's upper arm 259-260 mm against a true
+# 252 where the moved elbows gave it 291-295.
+ELBOW_BOUNDARY_SHIFT = 0.035
+# With the arm straight in a T-pose the boundary lies 5-10 mm from the elbow (the elbows of
+# the calibration frame 10 mm from the truth unmoved, 31-34 moved the full shift): the shift
+# grows with the bend measured between the boundaries, in full from this many degrees.
+ELBOW_FULL_SHIFT_BEND = 30.0
+
 # Push-back radii for a person seen from behind, at a 1.75 m stature. From behind, the
 # boundaries lie elsewhere on the body: on the body model with true labels, the hip's
 # boundary (the fold of the buttocks) is 33 mm in front of the joint against 95 mm from
@@ -353,6 +367,7 @@ def ring_joints(
     height: float,
     min_edges: int = 2,
     facing: float | None = None,
+    elbow_shift: float = 0.0,
 ) -> dict[str, tuple[np.ndarray, float]]:
     """Joint estimates from part boundaries, corrected for where the boundaries lie.
 
@@ -363,6 +378,9 @@ def ring_joints(
     boundary sits below the knee, the torso/thigh boundary below and inside the hip,
     the torso/upper-arm boundary below the shoulder: fixed offsets (scaled by
     stature) move them onto the joints. ``facing`` None or NaN: seen from the front.
+    ``elbow_shift`` (metres at a 1.75 m stature) moves each elbow that far down its
+    arm, away from the shoulder's boundary: the skeleton's fit uses
+    :data:`ELBOW_BOUNDARY_SHIFT`, the limbs' measurement none.
 
     Returns
     -------
@@ -382,6 +400,18 @@ def ring_joints(
     support = np.minimum(1.0, edges / 4.0)
     raw = {_RING_NAMES[k]: (pushed[k], support[k]) for k in np.flatnonzero(edges >= min_edges)}
     out = dict(raw)
+    for side in ("right", "left") if elbow_shift else ():
+        elbow, shoulder = raw.get(f"{side}_elbow"), raw.get(f"{side}_shoulder")
+        if elbow is not None and shoulder is not None:
+            down = _unit(elbow[0] - shoulder[0])
+            wrist = raw.get(f"{side}_hand")
+            share = 1.0  # of the shift, by how far the arm is bent (none straight)
+            if wrist is not None:
+                bend = math.degrees(math.acos(np.clip(down @ _unit(wrist[0] - elbow[0]), -1, 1)))
+                share = min(1.0, bend / ELBOW_FULL_SHIFT_BEND) if math.isfinite(bend) else 1.0
+            down = share * elbow_shift * scale * down
+            if _finite(down):
+                out[f"{side}_elbow"] = (elbow[0] + down, elbow[1])
     for side, other in (("right", "left"), ("left", "right")):
         knee, hip = raw.get(f"{side}_knee"), raw.get(f"{side}_hip")
         if knee is not None and hip is not None:
@@ -609,6 +639,7 @@ def fit_skeleton(
     shoulder_offset: np.ndarray | None = None,
     exits: np.ndarray | None = None,
     facing: float | None = None,
+    elbow_shift: float = ELBOW_BOUNDARY_SHIFT,
 ) -> SkeletonFit:
     """Fit the 15-joint skeleton to labelled points with calibrated bone lengths.
 
@@ -660,6 +691,10 @@ def fit_skeleton(
         How far the person is turned from the camera, degrees
         (:func:`posedrift.skeleton.facing_yaw` of the prediction, say): sets the
         ring joints' push-back radii (:func:`ring_joints`). None: seen from the front.
+    elbow_shift : float
+        How far the elbows are moved down the arm from their boundary, metres at a
+        1.75 m stature (:data:`ELBOW_BOUNDARY_SHIFT`; 0 to measure the limbs between
+        the boundaries as they lie, as the tracker's calibration does).
 
     Returns
     -------
@@ -679,7 +714,14 @@ def fit_skeleton(
     pred = None if prediction is None else np.asarray(prediction, dtype=float)
     centres, ecounts = part_boundaries(points, labels, rows, cols)
     axes, elong = part_axes(points, labels, min_points=min_part_points)
-    ring = ring_joints(centres, ecounts, height=height, min_edges=min_edges, facing=facing)
+    ring = ring_joints(
+        centres,
+        ecounts,
+        height=height,
+        min_edges=min_edges,
+        facing=facing,
+        elbow_shift=elbow_shift,
+    )
 
     joints = np.full((15, 3), np.nan)
     conf = np.zeros(15)

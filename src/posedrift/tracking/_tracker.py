@@ -882,8 +882,9 @@ class PoseTracker:
         self, points, labels, graph, prediction, *, sigma=None, anchor_shoulders=True
     ) -> _Attempt:
         cal = self._calibration
-        # Without anchoring, the shoulders are where the arms put them (calibration).
-        unanchored = {} if anchor_shoulders else {"shoulder_anchor": 0.0}
+        # Without anchoring, the shoulders are where the arms put them (calibration),
+        # from the elbows where their boundaries lie, as the limb lengths were measured.
+        unanchored = {} if anchor_shoulders else {"shoulder_anchor": 0.0, "elbow_shift": 0.0}
         modes = part_modes(points, labels, bandwidth=0.06)
         fit = fit_skeleton(
             points,
