@@ -14,9 +14,11 @@ from posedrift.skeleton._fit import (
     _P,
     ELBOW_BOUNDARY_SHIFT,
     ELBOW_FULL_SHIFT_BEND,
+    KNEE_BOUNDARY_SHIFT,
     LIMB_DIRECTION_WEIGHTS,
     N_PARTS,
     PART_RADII,
+    PREDICTED_SIGN_WEIGHT,
     RING_BACK_RADII,
     RING_JOINTS,
     SEGMENT_RATIOS,
@@ -421,7 +423,7 @@ def _ref_ring_joints(
         knee, hip = raw.get(f"{side}_knee"), raw.get(f"{side}_hip")
         if knee is not None and hip is not None:
             up = _ref_unit(hip[0] - knee[0])
-            out[f"{side}_knee"] = (knee[0] + 0.035 * scale * up, knee[1])
+            out[f"{side}_knee"] = (knee[0] + KNEE_BOUNDARY_SHIFT * scale * up, knee[1])
             lateral = np.zeros(3)
             if f"{other}_hip" in raw:
                 lat = hip[0] - raw[f"{other}_hip"][0]
@@ -518,6 +520,8 @@ def _ref_fit_skeleton(
                 far = ring[joint_name][0] - anchor if joint_name in ring else np.full(3, np.nan)
                 if np.isfinite(far).all():
                     towards = towards + far
+                elif pred is not None and np.isfinite(pred[ij] - anchor).all():
+                    towards = towards + PREDICTED_SIGN_WEIGHT * (pred[ij] - anchor)
                 direction = axis if axis @ towards >= 0 else -axis
             else:
                 direction = to_mode
@@ -758,6 +762,29 @@ def test_limb_axis_turns_towards_the_far_end_it_sees(mode_offset, seen_wrist):
     assert np.isclose(np.linalg.norm(hand - elbow), length, atol=1e-9)
     assert np.linalg.norm(hand - (elbow + length * true)) < 1e-3  # within a millimetre
     assert np.isnan(joints[J["left_hand"]]).all()  # unseen limbs are left alone
+
+
+def test_limb_axis_sign_follows_the_prediction_where_the_far_end_is_unseen():
+    # A forearm pointing at the camera: its mode lies behind the (pushed-back) elbow and
+    # its wrist is not seen, so the evidence alone turns the axis end for end; the
+    # predicted hand, 25 cm along the true direction, decides the sign, and only that:
+    # the hand follows the measured axis, not the prediction.
+    joints, kwargs, elbow, true = _one_forearm(-0.035, seen_wrist=False)
+    alone = joints.copy()
+    _place_limbs(alone, np.ones(15), np.ones(15, dtype=bool), **kwargs)
+    length = kwargs["bone_lengths"][J["right_hand"]]
+    assert np.linalg.norm(alone[J["right_hand"]] - (elbow - length * true)) < 1e-3
+    pred = np.full((15, 3), np.nan)
+    pred[J["right_elbow"]] = elbow
+    pred[J["right_hand"]] = elbow + 0.25 * (true + [0.0, 0.0, 0.3])  # roughly along it
+    kwargs["pred"] = pred
+    _place_limbs(joints, np.ones(15), np.ones(15, dtype=bool), **kwargs)
+    assert np.linalg.norm(joints[J["right_hand"]] - (elbow + length * true)) < 1e-3
+    # Evidence with a long baseline (the wrist's ring joint) still outweighs it.
+    joints, kwargs, elbow, true = _one_forearm(0.12, seen_wrist=True)
+    kwargs["pred"] = np.where(np.isfinite(pred), 2 * elbow - pred, np.nan)  # a flipped guess
+    _place_limbs(joints, np.ones(15), np.ones(15, dtype=bool), **kwargs)
+    assert np.linalg.norm(joints[J["right_hand"]] - (elbow + length * true)) < 1e-3
 
 
 def test_elbows_are_moved_off_their_boundary_down_the_arm(rendered):

@@ -71,6 +71,17 @@ ELBOW_BOUNDARY_SHIFT = 0.035
 # the calibration frame 10 mm from the truth unmoved, 31-34 moved the full shift): the shift
 # grows with the bend measured between the boundaries, in full from this many degrees.
 ELBOW_FULL_SHIFT_BEND = 30.0
+# How far up the thigh each knee is moved from the thigh/shank boundary, at a 1.75 m
+# stature. With true labels the boundary lies 15 mm below the knee (the script above),
+# but on the tracker's own labels 25-35 mm gave the lowest knee errors (15 and 45 mm
+# worse on the development and held-out clips, one sample each): its labels put the
+# boundary lower than the truth does.
+KNEE_BOUNDARY_SHIFT = 0.035
+# Where a limb's far ring joint is unseen, the predicted far joint (the last skeleton,
+# carried by the registration) joins the evidence that turns the limb's axis, at this
+# weight: a forearm pointed at the camera has its mode a few centimetres from the
+# elbow, behind it once both are pushed back, and its wrist hidden by the hand.
+PREDICTED_SIGN_WEIGHT = 0.5
 
 # Push-back radii for a person seen from behind, at a 1.75 m stature. From behind, the
 # boundaries lie elsewhere on the body: on the body model with true labels, the hip's
@@ -416,7 +427,7 @@ def ring_joints(
         knee, hip = raw.get(f"{side}_knee"), raw.get(f"{side}_hip")
         if knee is not None and hip is not None:
             up = _unit(hip[0] - knee[0])
-            out[f"{side}_knee"] = (knee[0] + 0.035 * scale * up, knee[1])
+            out[f"{side}_knee"] = (knee[0] + KNEE_BOUNDARY_SHIFT * scale * up, knee[1])
             lateral = np.zeros(3)
             if f"{other}_hip" in raw:
                 lat = hip[0] - raw[f"{other}_hip"][0]
@@ -514,12 +525,16 @@ def _place_limbs(
     # it sees: the offsets to its mode and to the ring joint at its far end, summed
     # unnormalised so that the longer baseline decides. A mode a few centimetres from
     # the anchor, on the wrong side of it after a poor labelling, would otherwise turn
-    # a forearm whose wrist is seen end for end.
+    # a forearm whose wrist is seen end for end. Where the far end is unseen, the
+    # predicted far joint joins them (PREDICTED_SIGN_WEIGHT).
     axis = axes[part]
     use_axis = live & (elong[part] >= min_elongation) & _rows_finite(to_mode)
     far = np.array([ring[name][0] if name in ring else _NAN3 for name in _LIMB_NAMES])
     reach = np.linalg.norm(modes_back[part] - anchor, axis=1)
     towards = _finite_or_zero(to_mode * reach[:, None]) + _finite_or_zero(far - anchor)
+    if pred is not None:
+        unseen = ~_rows_finite(far)
+        towards[unseen] += PREDICTED_SIGN_WEIGHT * _finite_or_zero(pred[ij] - anchor)[unseen]
     facing = (axis * towards).sum(axis=1) >= 0  # the sign of axis @ towards
     direction = np.where(use_axis[:, None], np.where(facing[:, None], axis, -axis), to_mode)
     direction[~live] = np.nan
