@@ -10,7 +10,13 @@ from typer.testing import CliRunner
 import posedrift.evaluation._harness as harness
 from posedrift.camera import DepthFrame, backproject, camera_preset
 from posedrift.cli import app
-from posedrift.evaluation import EvaluationSequence, Reference, evaluate, parse_methods
+from posedrift.evaluation import (
+    EvaluationSequence,
+    Reference,
+    evaluate,
+    markdown_table,
+    parse_methods,
+)
 from posedrift.skeleton import ANGLE_NAMES, JOINT_NAMES, facing_yaw, joint_angles, t_pose_joints
 from posedrift.tracking import FrameResult, FrameStatus
 
@@ -156,6 +162,31 @@ def test_by_view_tells_a_skeleton_that_faces_the_camera_from_a_person_turned_awa
     following = report["methods"]["true"]["by_view"]["back"]
     assert following["facing_yaw_median_deg"] == pytest.approx(180.0, abs=1e-6)
     assert following["angle_error_mean_deg"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_in_view_splits_the_errors_on_angles_whose_joints_leave_the_image():
+    seq = _toy_sequence()
+    truth = seq.reference.joints[0]
+    raised = np.repeat(truth[None], len(seq.frames), axis=0)
+    hand = JOINT_NAMES.index("left_hand")
+    raised[3:, hand] = truth[JOINT_NAMES.index("left_elbow")] + [0.0, -2.0, 0.0]  # above the top
+    ref = Reference(joints=raised, angles=joint_angles(raised), labels=seq.reference.labels)
+    seq = EvaluationSequence(name="raised", frames=seq.frames, reference=ref)
+    report = evaluate(
+        [seq], {"still": lambda k, forest=None: Still(truth)}, progress=False, forest=object()
+    )
+    row = report["methods"]["still"]
+    # Only the left elbow's angle, in the last three of six frames, has a joint out of view:
+    # the T-pose scores 0 on the angles in view and the hand's 90 degrees on the rest.
+    assert row["in_view"] == {
+        "angle_share": pytest.approx(1 - 3 / (6 * 8), abs=1e-4),
+        "angle_error_mean_deg": 0.0,
+        "out_of_view_angle_error_mean_deg": pytest.approx(90.0, abs=1e-3),
+    }
+    assert row["angle_error_deg"]["left_elbow"] == pytest.approx(45.0, abs=1e-3)
+    assert "6.2% of the reference's angles have a joint outside the image" in markdown_table(
+        report, paper=False
+    )
 
 
 def test_parse_methods():

@@ -3,15 +3,17 @@
 import numpy as np
 import pytest
 
+from posedrift.camera import camera_preset
 from posedrift.evaluation import (
     angle_errors,
+    angles_in_view,
     failed_frames,
     fill_forward,
     map_at,
     markdown_table,
     mpjpe_mm,
 )
-from posedrift.skeleton import ANGLE_NAMES, joint_angles, t_pose_joints
+from posedrift.skeleton import ANGLE_JOINTS, ANGLE_NAMES, JOINT_INDEX, joint_angles, t_pose_joints
 
 
 def test_angle_errors_hand_computed():
@@ -114,3 +116,23 @@ def test_drift_compares_the_first_and_last_hundred_frames():
     est[150:] -= 3.0
     assert _drift(est, ref) == {"first_100_deg": 1.0, "last_100_deg": 3.0}
     assert _drift(est[:199], ref[:199]) == {}
+
+
+def test_angles_in_view_needs_every_joint_of_the_angle_in_the_image():
+    kinect = camera_preset("kinect1-qvga")
+    facing = t_pose_joints(1.75) * [1, -1, -1] + [0, 0.9, 3.0]  # 2.5 m x 3.4 m in view
+    assert angles_in_view(facing[None], kinect).all()  # identity: the whole person in view
+    frames = np.repeat(facing[None], 4, axis=0)
+    frames[1, JOINT_INDEX["left_hand"], 0] = 2.0  # 350 px right of the image centre
+    frames[2, JOINT_INDEX["neck"], 2] = -1.0  # behind the camera
+    frames[3, JOINT_INDEX["right_foot"]] = np.nan
+    seen = angles_in_view(frames, kinect)
+    assert seen[0].all()
+    assert seen[1].tolist() == [name != "left_elbow" for name in ANGLE_NAMES]
+    # The neck sets the trunk's axis: every shoulder and hip angle needs it.
+    assert seen[2].tolist() == [name in ("left_elbow", "right_elbow", "left_knee", "right_knee")
+                                for name in ANGLE_NAMES]  # fmt: skip
+    assert seen[3].tolist() == [name != "right_knee" for name in ANGLE_NAMES]
+    assert all("neck" in ANGLE_JOINTS[a] for a in ANGLE_NAMES if a.endswith(("shoulder", "hip")))
+    with pytest.raises(ValueError, match="angles_in_view"):
+        angles_in_view(facing, kinect)

@@ -17,6 +17,7 @@ from posedrift.evaluation._harness import (
 )
 from posedrift.evaluation._metrics import (
     angle_errors,
+    angles_in_view,
     failed_frames,
     fill_forward,
     joint_errors_m,
@@ -45,6 +46,7 @@ __all__ = [
     "MethodRun",
     "Reference",
     "angle_errors",
+    "angles_in_view",
     "evaluate",
     "facing_by_view",
     "failed_frames",

@@ -22,6 +22,7 @@ from posedrift._validation import check_scalar
 from posedrift.camera import DepthFrame, Intrinsics, project
 from posedrift.evaluation._metrics import (
     angle_errors,
+    angles_in_view,
     failed_frames,
     fill_forward,
     map_at,
@@ -634,6 +635,24 @@ def _by_view(joints: np.ndarray, reference: np.ndarray, ref_angles: np.ndarray) 
     return out
 
 
+def _reference_in_view(record: SequenceRecord) -> np.ndarray:
+    """``(T, 8)``: the sequence's reference angles whose joints all lie in its frames."""
+    return angles_in_view(record.reference.joints, record.intrinsics)
+
+
+def _in_view(angles: np.ndarray, ref_angles: np.ndarray, in_view: np.ndarray) -> dict:
+    """The angle errors split by whether the reference's joints lie in the image."""
+    known = np.isfinite(ref_angles)
+    share = float(in_view[known].mean()) if known.any() else None
+    inside = angle_errors(np.where(in_view, angles, np.nan), ref_angles)["mean"]
+    outside = angle_errors(np.where(in_view, np.nan, angles), ref_angles)["mean"]
+    return {
+        "angle_share": _round(share),
+        "angle_error_mean_deg": _round(inside),
+        "out_of_view_angle_error_mean_deg": _round(outside),
+    }
+
+
 def _sequence_summary(joints: np.ndarray, reference: Reference) -> dict:
     """One method's errors on one sequence (the JSON's ``per_sequence`` entries)."""
     angles = joint_angles(joints)
@@ -662,7 +681,11 @@ def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
     (frames per :class:`~posedrift.tracking.FrameStatus`), ``"by_view"`` (the mean
     angle error over the frames where the reference faces the camera, is side on,
     or has its back to it: :data:`VIEWS`; with the median facing yaw of the method's
-    skeleton and of the reference there); per sequence of at least 200 frames,
+    skeleton and of the reference there), ``"in_view"`` (the share of the
+    reference's angles whose joints all lie in the image,
+    :func:`~posedrift.evaluation.angles_in_view`, the mean angle error over them
+    and over the rest: a joint outside the image leaves nothing to measure it
+    by); per sequence of at least 200 frames,
     ``"first_100_deg"`` and ``"last_100_deg"`` (drift).
     """
     out: dict[str, Any] = {
@@ -680,6 +703,7 @@ def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
         filled = np.concatenate([fill_forward(j) for j in converted])
         ref = np.concatenate([s.reference.joints for s in run.sequences])
         ref_angles = np.concatenate([s.reference.angles for s in run.sequences])
+        in_view = np.concatenate([_reference_in_view(s) for s in run.sequences])
         hits = sum(r.label_hits for r in per)
         counted = sum(r.label_total for r in per)
         seconds = sum(r.seconds for r in per)
@@ -705,6 +729,7 @@ def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
             "method_errors": sum(len(r.errors) for r in per),
             "status_counts": _status_counts(per),
             "by_view": _by_view(est, ref, ref_angles),
+            "in_view": _in_view(joint_angles(est), ref_angles, in_view),
         }
         if convention != "native":
             raw = np.concatenate(native)

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from posedrift.skeleton import ANGLE_NAMES, JOINT_NAMES
+from posedrift.camera import Intrinsics, project
+from posedrift.skeleton import ANGLE_JOINTS, ANGLE_NAMES, JOINT_INDEX, JOINT_NAMES
 
 
 def _check_same_shape(est: np.ndarray, ref: np.ndarray, shape: tuple, caller: str) -> None:
@@ -142,6 +143,54 @@ def map_at(est: np.ndarray, ref: np.ndarray, threshold: float = 0.10) -> float |
         if col.size:
             per_joint.append(float(np.mean(col < threshold)))
     return float(np.mean(per_joint)) if per_joint else None
+
+
+def angles_in_view(ref: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
+    """``(T, 8)`` bool: where every joint an angle is computed from lies in the image.
+
+    A joint outside the image (or behind the camera) leaves nothing in the depth
+    frame to measure it by, so an error on such an angle scores a guess: a
+    climber's raised arms above the top of the view, the feet below its bottom.
+    The joints of each angle are :data:`posedrift.skeleton.ANGLE_JOINTS`; a joint
+    is in the image where it projects into ``[0, width) x [0, height)``.
+
+    Parameters
+    ----------
+    ref : (T, 15, 3) float
+        The reference joints, camera frame, metres.
+    intrinsics : Intrinsics
+        The camera that rendered or recorded the frames.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from posedrift.camera import Intrinsics
+    >>> from posedrift.skeleton import t_pose_joints
+    >>> joints = t_pose_joints(1.75) * [1.0, -1.0, -1.0] + [0.0, 0.9, 3.0]  # camera frame
+    >>> kinect = Intrinsics(fx=285.63, fy=285.63, cx=160.0, cy=120.0, width=320, height=240)
+    >>> angles_in_view(joints[None], kinect).all()
+    np.True_
+    >>> angles_in_view(joints[None] - [0.0, 0.8, 0.0], kinect)[0].tolist()  # shoulders cut off
+    [False, False, False, False, True, True, False, False]
+    """
+    ref = np.asarray(ref, dtype=float)
+    _check_same_shape(ref, ref, (0, len(JOINT_NAMES), 3), "angles_in_view")
+    known = np.isfinite(ref).all(axis=-1)
+    flat = np.where(known[..., None], ref, [0.0, 0.0, 1.0]).reshape(-1, 3)
+    uv = project(flat, intrinsics).reshape(*ref.shape[:2], 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inside = (
+            known
+            & (ref[..., 2] > 0)
+            & (uv[..., 0] >= 0)
+            & (uv[..., 0] < intrinsics.width)
+            & (uv[..., 1] >= 0)
+            & (uv[..., 1] < intrinsics.height)
+        )
+    columns = [
+        inside[:, [JOINT_INDEX[j] for j in ANGLE_JOINTS[a]]].all(axis=1) for a in ANGLE_NAMES
+    ]
+    return np.stack(columns, axis=1)
 
 
 def failed_frames(est: np.ndarray) -> np.ndarray:

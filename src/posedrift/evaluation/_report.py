@@ -29,13 +29,31 @@ def _fmt(value: float | None, digits: int = 2) -> str:
     return "-" if value is None else f"{value:.{digits}f}"
 
 
+def _in_view_note(report: Mapping) -> str:
+    """A line on the angles whose reference joints leave the image, where there are any."""
+    rows = {name: row["in_view"] for name, row in report["methods"].items() if "in_view" in row}
+    shares = [v["angle_share"] for v in rows.values() if v.get("angle_share") is not None]
+    if not shares or min(shares) >= 1.0:
+        return ""
+    means = ", ".join(
+        f"{name} {_fmt(v['angle_error_mean_deg'])} ({_fmt(v['out_of_view_angle_error_mean_deg'])})"
+        for name, v in rows.items()
+    )
+    return (
+        f"\n{100 * (1 - min(shares)):.1f}% of the reference's angles have a joint outside the "
+        f"image. Mean angle error over the angles in view (and over the rest): {means}.\n"
+    )
+
+
 def markdown_table(report: Mapping, *, paper: bool = True) -> str:
     """Table 1 of the paper for one evaluation (the JSON of ``posedrift eval``).
 
     Rows are the methods; columns the eight mean absolute angle errors (degrees,
     the paper's order), their mean, then MPJPE (mm), mAP@10cm, frames per second
     and failed frames. A method run several times (``evaluate(repeats=)``) shows
-    its mean over the runs and their standard deviation (``mean ± sd``).
+    its mean over the runs and their standard deviation (``mean ± sd``). Where some of
+    the reference's angles have a joint outside the image, a line under the table
+    gives each method's error over the angles in view and over the rest (``in_view``).
 
     Parameters
     ----------
@@ -100,6 +118,7 @@ def markdown_table(report: Mapping, *, paper: bool = True) -> str:
             f"\nJoints scored in the {convention} convention (fixed per-joint offsets, "
             f"posedrift.skeleton.to_convention). Unconverted MPJPE / mAP@10cm: {native}.\n"
         )
+    text += _in_view_note(report)
     if paper:
         text += (
             "\nRows marked *paper* are the paper's Table 1, measured on its own synthetic data "

@@ -1,6 +1,12 @@
 """The 15-joint skeleton, the 15 body parts, and the eight joint angles."""
 
-from posedrift.skeleton._angles import angles_dict, facing_yaw, joint_angles, pelvis_centre
+from posedrift.skeleton._angles import (
+    ANGLE_JOINTS,
+    angles_dict,
+    facing_yaw,
+    joint_angles,
+    pelvis_centre,
+)
 from posedrift.skeleton._convention import (
     CONVENTIONS,
     body_frame,
@@ -22,6 +28,7 @@ from posedrift.skeleton._definitions import (
 from posedrift.skeleton._tpose import t_pose_joints
 
 __all__ = [
+    "ANGLE_JOINTS",
     "ANGLE_NAMES",
     "CONVENTIONS",
     "EXTRA_POINT_NAMES",

@@ -20,6 +20,13 @@ _TRUNK_RELATIVE = {
     "left_hip": ("left_hip", "left_knee"),
     "right_hip": ("right_hip", "right_knee"),
 }
+_TRUNK = ("neck", "left_hip", "right_hip")  # the trunk's downward axis
+
+ANGLE_JOINTS: dict[str, tuple[str, ...]] = {
+    name: _HINGES[name] if name in _HINGES else tuple(dict.fromkeys(_TRUNK_RELATIVE[name] + _TRUNK))
+    for name in ANGLE_NAMES
+}
+"""The joints each of the eight angles is computed from (:func:`joint_angles`)."""
 
 
 def _angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
