@@ -44,8 +44,8 @@ class RecordingTracker(PoseTracker):
         self.records: list[dict] = []
         self.frame_index = -1
 
-    def _register(self, source, target, labels):
-        out = super()._register(source, target, labels)
+    def _register(self, source, target, labels, correspondence):
+        out = super()._register(source, target, labels, correspondence)
         res = out[2]
         if res is not None:
             self.records.append(

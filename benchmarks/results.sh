@@ -14,9 +14,9 @@ M="$data/mocap"
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1
 methods=cpd,shotton,pda,icp
 # The headline tables also run the tracker with the frontal net alone (cpd-frontal), without
-# the part nets (cpd-forest: the forest labels its pixels) and Shotton et al.'s joints from
-# the net's labels (shotton-net).
-wide=cpd,cpd-frontal,cpd-forest,shotton,shotton-net,pda,icp
+# the part nets (cpd-forest: the forest labels its pixels), without ICP's second opinion
+# (cpd-nofallback) and Shotton et al.'s joints from the net's labels (shotton-net).
+wide=cpd,cpd-frontal,cpd-forest,cpd-nofallback,shotton,shotton-net,pda,icp
 # Table 1's development and held-out clips (less the built-in motion), for the runs nearer
 # the camera.
 close_clips=("$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" "$M/cmu/002_10.bvh" "$M/cmu/001_08.bvh"
@@ -45,7 +45,8 @@ for d in 2.0 3.5; do
         | tee "$out/vga_$d.md"
 done
 # Ablations of the tracker.
-ablations=cpd,cpd-paper,icp-paper,cpd-norelabel,cpd-novotes,cpd-rigid,cpd-cold,cpd-reinit
+ablations=cpd,cpd-paper,icp-paper,cpd-norelabel,cpd-novotes,cpd-rigid,cpd-cold,cpd-reinit,\
+cpd-nofallback
 posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 \
     --methods "$ablations,cpd-200,cpd-800" \
     --json "$out/ablations.json" --no-paper | tee "$out/ablations.md"

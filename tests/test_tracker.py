@@ -326,6 +326,8 @@ def test_errors_and_protocol(sequence):
         PoseTracker(K, correspondence="magic")
     with pytest.raises(ValueError, match="'n_points' parameter of PoseTracker"):
         PoseTracker(K, n_points=5)
+    with pytest.raises(ValueError, match="'icp_fallback' parameter of PoseTracker"):
+        PoseTracker(K, icp_fallback=1.5)
     with pytest.raises(ValueError, match="'intrinsics' argument of PoseTracker"):
         PoseTracker((1, 2, 3))
     tracker = PoseTracker(K, forest=LabelImages(sequence))
@@ -555,27 +557,83 @@ def test_carried_joints_follow_the_field_near_the_points_and_the_body_away():
     np.testing.assert_allclose(_carry_joints(joints, source, moved, nan_field), rigid, atol=1e-9)
 
 
-def test_a_failed_track_is_kept_where_it_explains_the_forest_better():
+def _labelled_t_pose(rng):
+    """A T-pose 2.5 m away, 400 points on its bones, labels that a labeller gets right."""
     from posedrift.skeleton import t_pose_joints
-    from posedrift.skeleton._fit import SkeletonFit
-    from posedrift.tracking._health import Health, _segments
-    from posedrift.tracking._tracker import _Attempt
+    from posedrift.tracking._health import _segments
 
-    rng = np.random.default_rng(0)
     truth = t_pose_joints(1.75) + [0.0, 0.0, 2.5]
     labels = rng.integers(0, 15, size=400)
     starts, ends = _segments(truth)
     points = starts[labels] + rng.random((400, 1)) * (ends - starts)[labels]
-    forest = np.full((400, 15), 0.01)  # the forest labels every point right
-    forest[np.arange(400), labels] = 0.86
+    probabilities = np.full((400, 15), 0.01)
+    probabilities[np.arange(400), labels] = 0.86
     wrong_arm = truth.copy()  # the right arm along the trunk where it is held out
     shoulder = truth[JOINT_INDEX["right_shoulder"]]
     for name, along in (("right_elbow", 0.3), ("right_hand", 0.55)):
         wrong_arm[JOINT_INDEX[name]] = shoulder - [0.0, along, 0.0]
+    return truth, wrong_arm, labels, points, probabilities
+
+
+def _attempt(joints, labels, ok, score=0.1):
+    from posedrift.skeleton._fit import SkeletonFit
+    from posedrift.tracking._health import Health
+    from posedrift.tracking._tracker import _Attempt
+
+    fit = SkeletonFit(joints, np.ones(15), np.ones(15, bool), np.full(15, np.nan))
+    return _Attempt(labels=labels, fit=fit, health=Health(ok, "", score, 0.0, 1.0))
+
+
+def test_a_doubtful_cpd_track_takes_icps_second_opinion_where_it_explains_the_labels_better():
+    from posedrift.tracking._health import unexplained_share
+
+    truth, wrong_arm, labels, points, appearance = _labelled_t_pose(np.random.default_rng(0))
+    # The wrong arm leaves its upper arm's and forearm's points unexplained: 13% of them,
+    # beyond the 8% at which the second opinion is asked; the right skeleton explains all.
+    assert unexplained_share(points, labels, wrong_arm, height=1.75) > 0.08 + 0.03
+    assert unexplained_share(points, labels, truth, height=1.75) == 0.0
+
+    def run(cpd, icp, tracker=None, appearance=appearance):
+        tracker = tracker or PoseTracker(K)
+        tracker._calibration = SimpleNamespace(height=1.75)
+        asked = []
+
+        def track_with(correspondence, *args):
+            asked.append(correspondence)
+            return {"cpd": cpd, "icp": icp}[correspondence]
+
+        tracker._track_with = track_with
+        timings = {}
+        return tracker._track(points, None, timings, appearance), asked, timings
+
+    right, wrong = _attempt(truth, labels, True), _attempt(wrong_arm, labels, True)
+    # A healthy track that explains the labels: no second opinion.
+    kept, asked, timings = run(right, wrong)
+    assert kept is right and asked == ["cpd"] and "fallback" not in timings
+    # A track with an arm the labels contradict: ICP is asked and kept where it explains
+    # them better, and timed.
+    kept, asked, timings = run(wrong, right)
+    assert kept is right and asked == ["cpd", "icp"] and timings["fallback"] >= 0.0
+    # No better: the CPD track stays.
+    other_wrong = _attempt(wrong_arm, labels, True)
+    assert run(wrong, other_wrong)[0] is wrong
+    # A failed CPD track gives way to a healthy ICP one, and not to a failed one.
+    failed = _attempt(truth, labels, False)
+    assert run(failed, other_wrong)[0] is other_wrong
+    assert run(failed, _attempt(wrong_arm, labels, False))[0] is failed
+    # Off, and without the labeller's probabilities: CPD alone.
+    assert run(wrong, right, PoseTracker(K, icp_fallback=None))[1:] == (["cpd"], {})
+    assert run(wrong, right, appearance=None)[1:] == (["cpd"], {})
+    # The ICP baseline itself asks no one else.
+    assert run(wrong, right, PoseTracker(K, correspondence="icp"))[1:] == (["icp"], {})
+
+
+def test_a_failed_track_is_kept_where_it_explains_the_forest_better():
+    # The forest labels every point right.
+    truth, wrong_arm, labels, points, forest = _labelled_t_pose(np.random.default_rng(0))
 
     def attempt(joints, ok, score):
-        fit = SkeletonFit(joints, np.ones(15), np.ones(15, bool), np.full(15, np.nan))
-        return _Attempt(labels=labels, fit=fit, health=Health(ok, "", score, 0.0, 1.0))
+        return _attempt(joints, labels, ok, score)
 
     tracker = PoseTracker(K)
     tracker._calibration = SimpleNamespace(height=1.75)

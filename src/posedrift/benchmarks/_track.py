@@ -35,6 +35,7 @@ STAGES: tuple[str, ...] = (
     "register",
     "relabel",
     "skeleton",
+    "fallback",
     "initialize",
     "total",
 )

@@ -16,7 +16,8 @@ _METHODS_HELP = (
     "every view, no turned net), cpd-forest (the forest's labels, no part net), cpd-paper, "
     "icp-paper (the paper's pure tracking, no per-frame evidence), "
     "cpd-norelabel, cpd-novotes (no joint votes), cpd-rigid, cpd-cold, cpd-reinit (a failed "
-    "track always re-initialized), cpd-200, cpd-400, cpd-800, cpd-fullres."
+    "track always re-initialized), cpd-nofallback (CPD alone, no ICP second opinion), "
+    "cpd-200, cpd-400, cpd-800, cpd-fullres."
 )
 
 

@@ -154,6 +154,10 @@ METHODS: dict[str, tuple[str, MethodFactory]] = {
         "ablation: a failed track always replaced by a healthy re-initialization",
         _tracker(keep_better_track=False),
     ),
+    "cpd-nofallback": (
+        "ablation: CPD alone, without the ICP second opinion on doubtful frames",
+        _tracker(icp_fallback=None),
+    ),
     "cpd-200": ("ablation: 200 points", _tracker(n_points=200)),
     "cpd-400": ("ablation: 400 points (the default)", _tracker(n_points=400)),
     "cpd-800": ("ablation: 800 points", _tracker(n_points=800)),

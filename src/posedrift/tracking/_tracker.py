@@ -56,6 +56,9 @@ from posedrift.tracking._result import FrameResult, FrameStatus
 
 N_PARTS = 15
 _TRACK_FLOOR = 0.02  # floor of the tracked posterior in the fusion with appearance
+# How much better (share of points far from their part's bone, by the labeller's labels) the
+# ICP fallback's skeleton must explain the frame to replace the CPD track (``icp_fallback``).
+_FALLBACK_MARGIN = 0.03
 _UNSEEN_CONFIDENCE = 0.3  # a joint outside the image, as fit_skeleton's joints from the prediction
 # How far from the template's nearest point (metres) a joint follows the registration's
 # nonrigid field, and from where on the body's rigid motion alone (_carry_joints).
@@ -285,6 +288,16 @@ class PoseTracker:
         False: a fresh initialization replaces the failed track whenever it is
         healthy or scores lower. Needs the forest's per-point probabilities (see
         ``appearance_weight``).
+    icp_fallback : float or None
+        A second opinion for a doubtful CPD track (beyond the paper): where more than
+        this share of the points lie far from their part's bone by the labeller's
+        per-point labels, or the track fails its health check, the frame is tracked
+        again from the same template with nearest-neighbour (ICP) correspondences,
+        and that track is kept where it is healthy and the CPD track is not, or where
+        it explains the labeller's labels better by 0.03 (``_FALLBACK_MARGIN``). On
+        the development clips it ran on 18% of the frames and was kept on 0.8%
+        (docs/RESULTS.md). None: CPD alone. Needs the per-point probabilities (see
+        ``appearance_weight``); ignored with ``correspondence="icp"``.
     rng : int or Generator
         Seeds downsampling and RANSAC (runs are repeatable for an int).
 
@@ -334,6 +347,7 @@ class PoseTracker:
         vote_bandwidth: float = 0.05,
         calibration_frames: int = 30,
         keep_better_track: bool = True,
+        icp_fallback: float | None = 0.08,
         rng: int | np.random.Generator | None = 0,
     ) -> None:
         caller = "PoseTracker"
@@ -419,6 +433,17 @@ class PoseTracker:
             caller=caller,
         )
         self.keep_better_track = bool(keep_better_track)
+        if icp_fallback is not None:
+            icp_fallback = check_scalar(
+                icp_fallback,
+                "icp_fallback",
+                low=0.0,
+                high=1.0,
+                include_low=True,
+                include_high=True,
+                caller=caller,
+            )
+        self.icp_fallback = icp_fallback
         self._frame_votes: tuple[np.ndarray, ...] | None = None
         self.relabel = bool(relabel)
         self.registration = registration
@@ -708,9 +733,11 @@ class PoseTracker:
         self._floor = floor if floor is not None else self._floor
         return mask
 
-    def _register(self, source: np.ndarray, target: np.ndarray, labels: np.ndarray):
+    def _register(
+        self, source: np.ndarray, target: np.ndarray, labels: np.ndarray, correspondence: str
+    ):
         """Registration of the template onto the frame: (posterior (N,15), warp, result, sigma)."""
-        if self.correspondence == "icp":
+        if correspondence == "icp":
             rot, trans, nn = _icp(source, target)
             post = np.zeros((len(target), N_PARTS))
             post[np.arange(len(target)), labels[nn]] = 1.0
@@ -834,9 +861,36 @@ class PoseTracker:
     def _track(
         self, points: np.ndarray, graph, timings: dict[str, float], appearance=None
     ) -> _Attempt:
+        """This frame tracked from the last one, with ICP's second opinion (``icp_fallback``)."""
+        attempt = self._track_with(self.correspondence, points, graph, timings, appearance)
+        if self.correspondence != "cpd" or self.icp_fallback is None or appearance is None:
+            return attempt
+        # Judged by the labeller's labels, which neither registration produced.
+        labeller_labels = np.argmax(appearance, axis=1)
+        height = self._calibration.height
+
+        def unexplained(a: _Attempt) -> float:
+            if not np.isfinite(a.fit.joints).all():
+                return math.inf
+            return unexplained_share(points, labeller_labels, a.fit.joints, height=height)
+
+        share = unexplained(attempt)
+        if attempt.health.ok and share <= self.icp_fallback:
+            return attempt
+        t0 = time.perf_counter()
+        other = self._track_with("icp", points, graph, {}, appearance)
+        timings["fallback"] = 1e3 * (time.perf_counter() - t0)
+        if attempt.health.ok != other.health.ok:
+            return other if other.health.ok else attempt
+        return other if unexplained(other) < share - _FALLBACK_MARGIN else attempt
+
+    def _track_with(
+        self, correspondence: str, points: np.ndarray, graph, timings, appearance
+    ) -> _Attempt:
+        """One frame tracked from the template with ``correspondence`` ("cpd" or "icp")."""
         state, cal = self._state, self._calibration
         t0 = time.perf_counter()
-        post, warp, res, sigma = self._register(state.points, points, state.labels)
+        post, warp, res, sigma = self._register(state.points, points, state.labels, correspondence)
         t1 = time.perf_counter()
         timings["register"] = 1e3 * (t1 - t0)
         post = self._fuse(post, appearance)
