@@ -263,6 +263,37 @@ def test_tracking_in_a_room_keeps_floor_and_wall_out():
     assert tracker._floor is not None  # the floor found once is carried to the next frame
 
 
+def test_the_floor_is_searched_for_every_few_frames_while_none_is_found(sequence, monkeypatch):
+    import posedrift.tracking._tracker as tracking
+    from posedrift.synthetic import build_sequence, procedural_motion
+
+    searched: list[bool] = []
+    segment = tracking.segment_person
+
+    def spy(frame, **options):
+        searched.append(options.get("remove_floor", True))
+        return segment(frame, **options)
+
+    spy.__kwdefaults__ = segment.__kwdefaults__  # the tracker reads the depth gate's defaults
+
+    def searches(frame) -> bool:
+        start = len(searched)
+        assert tracker.process(frame).has_pose
+        return any(searched[start:])
+
+    monkeypatch.setattr(tracking, "segment_person", spy)
+    retry = tracking._FLOOR_RETRY
+    tracker = PoseTracker(K)
+    alone = [searches(f) for f in sequence.frames[: retry + 2]]  # nothing but the person
+    assert alone == [i % retry == 0 for i in range(retry + 2)]
+    assert tracker._floor is None
+    # A floor comes into view: without it the person is not found (the floor joins them
+    # to a component too large to be one), so it is searched for at once, then every frame.
+    room = build_sequence(procedural_motion(), n_frames=3, background=True, rng=0)
+    assert all(searches(f) for f in room.frames)
+    assert tracker._floor is not None
+
+
 def test_a_640x480_camera_is_tracked_at_half_resolution():
     from dataclasses import replace
 

@@ -67,6 +67,9 @@ _FIELD_TRUSTED, _FIELD_IGNORED = 0.03, 0.08
 # for the person first: limbs reach about a metre towards the camera, and walls and
 # clutter outside the band never reach the floor fit and the component search.
 _GATE_FRONT, _GATE_BEHIND = 1.2, 1.0
+# Frames between floor searches while none has been found: a static camera that showed no
+# floor shows none the next frame, and RANSAC's failed search costs 0.3 ms at 320 x 240.
+_FLOOR_RETRY = 15
 _MIN_WORKING_FOCAL = 190.0  # pixels; see working_decimation
 _RING_OFFSETS = sorted(
     ((dr, dc) for dr in range(-3, 4) for dc in range(-3, 4) if (dr, dc) != (0, 0)),
@@ -489,6 +492,7 @@ class PoseTracker:
         self._voxel: float | None = None
         self._person_depth: float | None = None
         self._floor: tuple[np.ndarray, float] | None = None
+        self._floorless_frames = 0  # frames segmented while no floor plane is known
         self._seed_registration = None
 
     @property
@@ -702,13 +706,30 @@ class PoseTracker:
         return self._working_backgrounds[step]
 
     def _segment(self, frame: DepthFrame) -> np.ndarray:
-        """The person's pixels: first within a depth band around the last frame's person.
+        """The person's pixels (:meth:`_find_person`), keeping the floor plane found.
+
+        The last floor plane found is tried first (a static camera's floor stays
+        put). While none has been found, the floor is searched for only every
+        :data:`_FLOOR_RETRY` frames, and at once where the person is not found
+        without it (a floor that came into view joins the person to a component too
+        large to be one).
+        """
+        searching = self._floor is not None or self._floorless_frames % _FLOOR_RETRY == 0
+        mask, floor = self._find_person(frame, search_floor=searching)
+        if not searching and np.count_nonzero(mask) < self.min_points:
+            mask, floor = self._find_person(frame, search_floor=True)
+        self._floor = floor if floor is not None else self._floor
+        self._floorless_frames = 0 if self._floor is not None else self._floorless_frames + 1
+        return mask
+
+    def _find_person(self, frame: DepthFrame, *, search_floor: bool):
+        """``(mask, floor)`` of :func:`segment_person`: first within a depth band
+        around the last frame's person.
 
         The band drops walls and far clutter before the floor fit and the component
         search (a noisy room at 320 x 240: 4.3 -> 1.6 ms); where it holds no person
         (one who jumped towards the camera, or left), the whole depth range is
-        searched. The last floor plane found is tried first (a static camera's floor
-        stays put).
+        searched.
         """
         options = {
             "background": self._working_background(frame.depth.shape),
@@ -717,6 +738,8 @@ class PoseTracker:
             "floor": self._floor,
             "return_floor": True,
         }
+        if not search_floor:
+            options["remove_floor"] = False
         if self._person_depth is not None:
             defaults = segment_person.__kwdefaults__
             near = options.get("min_depth", defaults["min_depth"])
@@ -727,11 +750,8 @@ class PoseTracker:
             }
             mask, floor = segment_person(frame, **{**options, **band})
             if np.count_nonzero(mask) >= self.min_points:
-                self._floor = floor if floor is not None else self._floor
-                return mask
-        mask, floor = segment_person(frame, **options)
-        self._floor = floor if floor is not None else self._floor
-        return mask
+                return mask, floor
+        return segment_person(frame, **options)
 
     def _register(
         self, source: np.ndarray, target: np.ndarray, labels: np.ndarray, correspondence: str
