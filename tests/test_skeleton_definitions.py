@@ -93,3 +93,21 @@ def test_facing_yaw_follows_a_turn_about_the_vertical():
     np.testing.assert_allclose(got, [0.0, 30.0, 90.0, 150.0, 180.0, 60.0], atol=1e-9)
     unknown = np.full((15, 3), np.nan)
     assert np.isnan(facing_yaw(unknown))
+
+
+def test_facing_yaw_of_one_skeleton_is_the_batched_value_to_the_last_bit():
+    from posedrift.skeleton import facing_yaw
+
+    rng = np.random.default_rng(0)
+    skeletons = rng.normal(0.0, 0.5, (2000, 15, 3)) + [0.0, 0.0, 3.0]
+    skeletons[::7, :, 1] = 0.0  # exact zeros where up's products vanish
+    skeletons[::11, [JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"]]] = 0.0  # at the camera
+    skeletons[::13, JOINT_INDEX["left_shoulder"], 0] = np.nan
+    batched = facing_yaw(skeletons)
+    one = np.array([facing_yaw(s) for s in skeletons])
+    np.testing.assert_array_equal(one, batched)  # NaN where the batch has NaN
+    assert np.isnan(one).any() and np.isfinite(one).sum() > 1500
+    # A skeleton level with the camera's centre (no horizontal direction to it): NaN.
+    level = np.zeros((15, 3))
+    level[JOINT_INDEX["left_shoulder"], 0] = 0.2
+    assert np.isnan(facing_yaw(level)) and np.isnan(facing_yaw(level[None])[0])
