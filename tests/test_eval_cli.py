@@ -253,6 +253,8 @@ def test_eval_synthetic_cli_schema_and_skip(mocap_dir, tmp_path, monkeypatch):
         "room",
         "camera",
         "distance",
+        "camera_height",
+        "camera_tilt",
         "in_place",
         "there_and_back",
         "facing",
@@ -749,6 +751,24 @@ def test_eval_synthetic_turns_the_person_away(tmp_path, built):
     assert abs(facing_yaw(built[0].reference.joints[0]) - 180.0) < 1.0
     result = CliRunner().invoke(app, [*args, "--facing", "400"])
     assert result.exit_code == 2 and "--facing" in result.output
+
+
+def test_eval_synthetic_looks_down_from_a_high_camera(tmp_path, built):
+    out = tmp_path / "high.json"
+    args = ["-q", "eval", "synthetic", "builtin", "--frames", "2", "--methods", "pda"]
+    high = ["--camera-height", "2.2", "--camera-tilt", "25"]
+    result = CliRunner().invoke(app, [*args, *high, "--json", str(out)])
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert data["camera_height"] == 2.2 and data["camera_tilt"] == 25.0
+    # The person's vertical leans 25 degrees in the camera frame: head nearer than feet.
+    joints = built[0].reference.joints[0]
+    head, foot = joints[JOINT_NAMES.index("head")], joints[JOINT_NAMES.index("right_foot")]
+    lean = np.degrees(np.arctan2(foot[2] - head[2], foot[1] - head[1]))
+    assert abs(lean - 25.0) < 3.0
+    for bad in (["--camera-tilt", "90"], ["--camera-height", "0"]):
+        result = CliRunner().invoke(app, [*args, *bad])
+        assert result.exit_code == 2 and bad[0] in result.output
 
 
 # --- repeats: the trackers run with several point-sampling seeds ------------------------------

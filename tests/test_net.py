@@ -292,9 +292,12 @@ def test_cli_train_net_is_reproducible_and_checks_its_options(tmp_path):
         np.testing.assert_array_equal(first, second)
     assert a.metadata["command"] == "posedrift train --classifier net"
     assert a.metadata["samples"] == 600 and a.metadata["epochs"] == 2
+    assert a.metadata["camera_heights"] == [0.7, 1.3]
     for bad, message in (
         (["--classifier", "svm"], "--classifier must be 'forest' or 'net'"),
         (["--hidden", "16,x"], "--hidden must be positive widths"),
+        (["--camera-heights", "1.3,0.7"], "--camera-heights must be LOW,HIGH metres"),
+        (["--camera-heights", "1.0"], "--camera-heights must be LOW,HIGH metres"),
     ):
         result = CliRunner().invoke(app, [*args, *bad, "--out", str(tmp_path / "c.npz")])
         assert result.exit_code == 2 and message in result.output

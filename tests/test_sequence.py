@@ -15,6 +15,7 @@ from posedrift.skeleton import (
     JOINT_NAMES,
     PART_INDEX,
     facing_yaw,
+    pelvis_centre,
     t_pose_joints,
 )
 from posedrift.synthetic import (
@@ -173,6 +174,26 @@ def test_place_camera_looks_level_at_the_pelvis():
     np.testing.assert_allclose(camera.rotation[2], [0.0, 0.0, -1.0], atol=1e-12)
 
 
+def test_a_tilted_camera_looks_down_at_the_person_from_its_height():
+    # From 2.2 m, tilted down by the angle to the pelvis, the pelvis lies on the optical
+    # axis at its 3 m distance (along the slant), and the eye stays where it was.
+    motion = _arms_down_motion(n=2)
+    pelvis = pelvis_centre(np.asarray(motion.joints[0], dtype=float))
+    drop = 2.2 - pelvis[1]
+    tilt = np.degrees(np.arctan2(drop, 3.0))
+    camera = place_camera(motion, distance=3.0, height=2.2, tilt=tilt)
+    np.testing.assert_allclose(
+        camera.camera_to_world(np.zeros(3)), [pelvis[0], 2.2, 3.0 + pelvis[2]], atol=1e-12
+    )
+    np.testing.assert_allclose(
+        camera.world_to_camera(pelvis), [0.0, 0.0, np.hypot(3.0, drop)], atol=1e-9
+    )
+    # Tilting turns the view about the camera's x axis only: the image's x stays level.
+    np.testing.assert_allclose(camera.rotation[0], [1.0, 0.0, 0.0], atol=1e-12)
+    with pytest.raises(ValueError, match="'camera_tilt'"):
+        place_camera(motion, tilt=90.0)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
@@ -182,6 +203,7 @@ def test_place_camera_looks_level_at_the_pelvis():
         ({"distance": -1.0}, "'distance'"),
         ({"rng": "x"}, "'rng'"),
         ({"facing": 400.0}, "'facing'"),
+        ({"camera_tilt": -95.0}, "'camera_tilt'"),
     ],
 )
 def test_build_sequence_errors_name_the_argument(body, kwargs, match):

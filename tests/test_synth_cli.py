@@ -115,6 +115,7 @@ def test_synth_a_bvh_clip(mocap_dir, tmp_path):
         (["--distance", "0"], "--distance must be greater than 0. Got 0."),
         (["--fps", "-30"], "--fps must be greater than 0. Got -30."),
         (["--facing", "400"], "--facing must be in (-360, 360). Got 400."),
+        (["--camera-tilt", "-90"], "--camera-tilt must be in (-90, 90). Got -90."),
         (["--size", "640x480"], "--size 640x480 goes with --intrinsics: the camera preset"),
         (["--camera", "d435", "--size", "512x424"], "give --camera kinect2, or --intrinsics"),
     ],

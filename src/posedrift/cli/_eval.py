@@ -100,6 +100,20 @@ def eval_synthetic(
         float | None,
         typer.Option("--distance", help="Camera to person at frame 0, metres (default 2.8)."),
     ] = None,
+    camera_height: Annotated[
+        float | None,
+        typer.Option(
+            "--camera-height", help="Camera height above the floor, metres (default 1.0)."
+        ),
+    ] = None,
+    camera_tilt: Annotated[
+        float,
+        typer.Option(
+            "--camera-tilt",
+            help="Degrees the camera looks down, in (-90, 90) (negative: up; 0, level, is the "
+            "protocol).",
+        ),
+    ] = 0.0,
     in_place: Annotated[
         bool,
         typer.Option(
@@ -183,8 +197,14 @@ def eval_synthetic(
     _check_range("--girth", girth, 0.0, None)
     _check_range("--distance", distance, 0.3, None)
     _check_range("--facing", facing, -360.0, 360.0)
+    _check_range("--camera-height", camera_height, 0.0, None)
+    _check_range("--camera-tilt", camera_tilt, -90.0, 90.0)
     _check_outputs(json_out, figures)
     placement = {} if distance is None else {"distance": distance}
+    if camera_height is not None:
+        placement["camera_height"] = camera_height
+    if camera_tilt != 0.0:
+        placement["camera_tilt"] = camera_tilt
     if camera is not None:
         from posedrift.camera import CAMERA_PRESETS
 
@@ -247,6 +267,8 @@ def eval_synthetic(
     report["room"] = bool(room)
     report["camera"] = camera or "kinect1-qvga"
     report["distance"] = distance
+    report["camera_height"] = camera_height
+    report["camera_tilt"] = float(camera_tilt)
     report["in_place"] = bool(in_place)
     report["there_and_back"] = bool(there_and_back)
     report["facing"] = float(facing)

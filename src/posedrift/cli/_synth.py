@@ -60,6 +60,13 @@ def synth(
     camera_height: Annotated[
         float, typer.Option("--camera-height", help="Camera height above the floor, metres.")
     ] = 1.0,
+    camera_tilt: Annotated[
+        float,
+        typer.Option(
+            "--camera-tilt",
+            help="Degrees the camera looks down, in (-90, 90) (negative: up; 0: level).",
+        ),
+    ] = 0.0,
     noise: Annotated[
         bool, typer.Option("--noise/--no-noise", help="Kinect v1-like depth noise.")
     ] = False,
@@ -119,6 +126,7 @@ def synth(
         ("--distance", distance, 0.0, None),
         ("--fps", fps, 0.0, None),
         ("--facing", facing, -360.0, 360.0),
+        ("--camera-tilt", camera_tilt, -90.0, 90.0),
     ):
         _check_range(option, value, low, high)
     check_output_dir(out, "--out")
@@ -145,6 +153,7 @@ def synth(
                 intrinsics=k,
                 distance=distance,
                 camera_height=camera_height,
+                camera_tilt=camera_tilt,
                 n_frames=frames,
                 fps=fps,
                 noise=noise,
@@ -160,7 +169,8 @@ def synth(
         if len(empty) == len(sequence.frames):
             raise fail(
                 f"no frame shows the person: they are out of the {k.width}x{k.height} view "
-                f"(--camera-height {camera_height:g} m, --distance {distance:g} m). "
+                f"(--camera-height {camera_height:g} m, --camera-tilt {camera_tilt:g}, "
+                f"--distance {distance:g} m). "
                 "Nothing written.",
                 code=1,
             )

@@ -77,6 +77,14 @@ def train(
             "--wide-yaw", min=0.0, max=180.0, help="Largest turn of the wide views, degrees."
         ),
     ] = 100.0,
+    camera_heights: Annotated[
+        str,
+        typer.Option(
+            "--camera-heights",
+            help="Range of the camera's height above the floor, metres, LOW,HIGH; half "
+            "the frames look level, half down or up at the person's pelvis.",
+        ),
+    ] = "0.7,1.3",
     mirror_share: Annotated[
         float,
         typer.Option(
@@ -154,6 +162,15 @@ def train(
             raise ValueError
     except ValueError:
         raise fail(f"--hidden must be positive widths, comma-separated. Got {hidden!r}.") from None
+    try:
+        heights = tuple(float(h) for h in camera_heights.split(","))
+        if len(heights) != 2 or not 0.0 < heights[0] <= heights[1] < 5.0:
+            raise ValueError
+    except ValueError:
+        raise fail(
+            f"--camera-heights must be LOW,HIGH metres with 0 < LOW <= HIGH < 5. "
+            f"Got {camera_heights!r}."
+        ) from None
     if classifier == "forest":
         try:
             import sklearn  # noqa: F401
@@ -191,7 +208,10 @@ def train(
         else:
             weights = [(1.0 - share) / max(n_clips, 1)] * n_clips + [share]
         ranges = tr.SceneRanges(
-            wide_fraction=wide_share, wide_yaw=wide_yaw, mirror_fraction=mirror_share
+            camera_height=heights,
+            wide_fraction=wide_share,
+            wide_yaw=wide_yaw,
+            mirror_fraction=mirror_share,
         )
         generator = tr.synthetic_training_frames(
             frames, motions, ranges=ranges, weights=weights, frames=pose_frames, rng=render_rng
@@ -206,6 +226,7 @@ def train(
             "wide_share": wide_share,
             "wide_yaw": wide_yaw,
             "mirror_share": mirror_share,
+            "camera_heights": list(heights),
             "min_pose_distance": min_pose_distance,
         }
         if classifier == "net":

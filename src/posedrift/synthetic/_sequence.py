@@ -39,14 +39,15 @@ def place_camera(
     *,
     distance: float = DEFAULT_DISTANCE,
     height: float | None = None,
+    tilt: float = 0.0,
 ) -> CameraPose:
     """The protocol's camera: in front of the person at frame 0, looking at them level.
 
     The person faces +Z at frame 0 (the world convention of :class:`Motion`); the
     camera stands on the +Z side at ``distance`` from the frame-0 pelvis centre
-    (measured horizontally), ``height`` above the floor, with a horizontal optical
-    axis pointing toward -Z. Facing the camera, the person's right appears on the
-    image's left.
+    (measured horizontally), ``height`` above the floor, with its optical axis
+    pointing toward -Z, horizontal or ``tilt`` degrees down. Facing the camera, the
+    person's right appears on the image's left.
 
     Parameters
     ----------
@@ -56,18 +57,31 @@ def place_camera(
         Metres, horizontal.
     height : float, optional
         Camera height in metres; default :data:`DEFAULT_CAMERA_HEIGHT`.
+    tilt : float
+        Degrees the optical axis points below the horizontal, in (-90, 90): a camera
+        mounted high looks down at the person (negative: up).
 
     Returns
     -------
     CameraPose
+
+    Examples
+    --------
+    >>> from posedrift.synthetic import procedural_motion
+    >>> pose = place_camera(procedural_motion(seconds=0.1), height=2.2, tilt=20.0)
+    >>> axis = pose.rotation[2]  # the optical axis (camera +Z) in the world frame
+    >>> round(float(np.degrees(np.arcsin(-axis[1]))), 6)
+    20.0
     """
     distance = check_scalar(distance, "distance", low=0, caller="place_camera")
     if height is None:
         height = DEFAULT_CAMERA_HEIGHT
     height = check_scalar(height, "camera_height", caller="place_camera")
+    tilt = check_scalar(tilt, "camera_tilt", low=-90.0, high=90.0, caller="place_camera")
     centre = pelvis_centre(np.asarray(motion.joints[0], dtype=float))
     eye = np.array([centre[0], height, centre[2] + distance])
-    target = np.array([centre[0], height, centre[2]])
+    down = np.radians(tilt)
+    target = eye + distance * np.array([0.0, -np.tan(down), -1.0])
     return CameraPose.look_at(eye, target)
 
 
@@ -78,6 +92,7 @@ def build_sequence(
     intrinsics: Intrinsics | None = None,
     distance: float = DEFAULT_DISTANCE,
     camera_height: float | None = None,
+    camera_tilt: float = 0.0,
     n_frames: int | None = None,
     fps: float = 30.0,
     noise: bool | Mapping[str, Any] = False,
@@ -114,6 +129,8 @@ def build_sequence(
         Metres from the camera to the person at frame 0.
     camera_height : float, optional
         Metres above the floor (default 1.0).
+    camera_tilt : float
+        Degrees the camera looks down (negative: up); 0, level, is the protocol's.
     n_frames : int, optional
         Frames to keep from the start (frame 0 is the T-pose); None keeps the whole
         clip, ending on its last frame. A clip shorter than ``n_frames`` gives all
@@ -216,7 +233,7 @@ def build_sequence(
         )
     count = len(order)
 
-    camera = place_camera(clip, distance=distance, height=camera_height)
+    camera = place_camera(clip, distance=distance, height=camera_height, tilt=camera_tilt)
     scene = None
     if background:
         centre = pelvis_centre(np.asarray(clip.joints[0], dtype=float))
