@@ -681,3 +681,63 @@ def test_a_failed_track_is_kept_where_it_explains_the_forest_better():
     assert tracker._replaces_track(fresh_wrong, failed_right, points, forest)
     # Without the forest's say, an unhealthy fresh start replaces only a worse-scoring track.
     assert not tracker._replaces_track(attempt(wrong_arm, False, 0.7), failed_right, points, None)
+
+
+def _tilt(degrees: float) -> np.ndarray:
+    """Level-camera coordinates to those of a camera looking ``degrees`` down."""
+    t = np.radians(degrees)
+    return np.array([[1.0, 0.0, 0.0], [0.0, np.cos(t), -np.sin(t)], [0.0, np.sin(t), np.cos(t)]])
+
+
+def test_world_up_from_the_floor_or_a_standing_skeleton():
+    from posedrift.skeleton import t_pose_joints
+    from posedrift.tracking._init import CAMERA_UP, level_rotation, world_up
+
+    level = t_pose_joints(1.75) * [1.0, -1.0, -1.0] + [0.0, 0.0, 3.0]
+    np.testing.assert_allclose(world_up(level), CAMERA_UP, atol=1e-12)  # identity
+    for degrees in (-15.0, 10.0, 30.0):
+        seen = level @ _tilt(degrees).T
+        np.testing.assert_allclose(world_up(seen), _tilt(degrees) @ CAMERA_UP, atol=1e-9)
+    # A floor plane decides, whichever way its normal points.
+    floor = _tilt(20.0) @ CAMERA_UP
+    np.testing.assert_allclose(world_up(level, floor_normal=-2.0 * floor), floor, atol=1e-12)
+    # Seated (knees bent 90 degrees), lying or incomplete: no estimate, a level camera.
+    seated = level.copy()
+    for side in ("right", "left"):
+        knee, foot = JOINT_INDEX[f"{side}_knee"], JOINT_INDEX[f"{side}_foot"]
+        seated[foot] = seated[knee] + [0.0, 0.0, np.linalg.norm(seated[foot] - seated[knee])]
+    lying = level @ _tilt(80.0).T
+    broken = level.copy()
+    broken[JOINT_INDEX["neck"]] = np.nan
+    for joints in (seated, lying, broken):
+        np.testing.assert_array_equal(world_up(joints), CAMERA_UP)
+    # The rotation that levels the camera: proper, and taking the level up onto up.
+    for up in (_tilt(24.0) @ CAMERA_UP, np.array([0.3, -0.9, 0.2]) / np.sqrt(0.94), CAMERA_UP):
+        rot = level_rotation(up)
+        np.testing.assert_allclose(rot @ rot.T, np.eye(3), atol=1e-12)
+        assert np.linalg.det(rot) == pytest.approx(1.0)
+        np.testing.assert_allclose(rot @ CAMERA_UP, up / np.linalg.norm(up), atol=1e-12)
+    np.testing.assert_allclose(level_rotation(-CAMERA_UP) @ CAMERA_UP, -CAMERA_UP, atol=1e-12)
+
+
+def test_a_camera_looking_down_is_levelled_for_the_votes_and_the_facing(sequence):
+    from posedrift.synthetic import build_sequence, procedural_motion
+    from posedrift.tracking._init import CAMERA_UP
+    from posedrift.tracking._tracker import _facing
+
+    high = build_sequence(
+        procedural_motion(), n_frames=3, rng=0, camera_height=2.2, camera_tilt=24.0
+    )
+    tracker = PoseTracker(K, rng=0)
+    results = _run(tracker, high.frames)
+    assert all(r.has_pose for r in results)
+    true_up = _tilt(24.0) @ CAMERA_UP
+    assert np.degrees(np.arccos(tracker.calibration.up @ true_up)) < 2.0
+    level = tracker._level()
+    assert level is not None and np.degrees(np.arccos(level[1, 1])) == pytest.approx(24.0, abs=2)
+    # The facing is read in the level frame: the person faces the camera.
+    assert _facing(results[-1].joints, level) < 10.0
+    # A level camera (within 5 degrees) keeps the level path, bit for bit what it was.
+    flat = PoseTracker(K, rng=0)
+    _run(flat, sequence.frames[:2])
+    assert flat._level() is None

@@ -43,7 +43,10 @@ class Calibration:
         ``D_j`` of Algorithm 2: geodesic reach of each part from its anchor, as a
         fraction of H.
     up : (3,) float
-        The person's upward direction in the camera frame at initialization.
+        The world's up direction in the camera frame: from :func:`calibrate`, the
+        trunk's axis (:func:`estimate_up`, which the stature is measured along); the
+        tracker then replaces it by :func:`world_up` of the calibration skeleton (or
+        of the floor), which tells a camera that looks down or up.
     shoulders : (2,) float or None
         Where the shoulders sit from the neck, ``(across, below)`` in metres
         (:func:`measure_shoulders`); None for the T-pose's geometry.
@@ -100,6 +103,104 @@ def estimate_up(points: np.ndarray, labels: np.ndarray) -> np.ndarray:
         if axis @ up > np.cos(np.radians(40)):
             up = axis
     return up / np.linalg.norm(up)
+
+
+CAMERA_UP = np.array([0.0, -1.0, 0.0])
+"""The world's up in the frame of a level camera (OpenCV axes: +Y down)."""
+_UPRIGHT_DEG = 35.0  # a line further from the camera's vertical is not taken for the world's
+_STRAIGHT_KNEE_DEG = 25.0  # a knee bent less than this is a standing leg
+
+
+def world_up(joints: np.ndarray, *, floor_normal: np.ndarray | None = None) -> np.ndarray:
+    """The world's up direction in the camera frame, for a camera that may look down or up.
+
+    The floor's normal where a floor plane is known; else the line from the ankles
+    of a standing skeleton (both knees straight) to its neck: a person standing when
+    the tracker calibrates stands upright. Camera ``-Y`` (:data:`CAMERA_UP`) where
+    the skeleton is incomplete or not standing (a seated person's trunk leans back:
+    on the real recording that begins seated its pelvis-to-neck line lay 13 degrees
+    behind the others' standing lines) or its line leans more than 35 degrees from
+    the camera's vertical.
+
+    The line from the ankles to the neck of the skeleton fitted to a person standing
+    in front of the camera stays within 1.5 degrees of the true vertical, level or
+    looking down 24 degrees; the trunk's points (:func:`estimate_up`) lean 6-8
+    degrees back with the chest's surface.
+
+    Parameters
+    ----------
+    joints : (15, 3) float
+        A skeleton in the camera frame, metres (``JOINT_NAMES``).
+    floor_normal : (3,) float, optional
+        The floor plane's normal, either sign.
+
+    Returns
+    -------
+    (3,) float
+        Unit vector.
+
+    Examples
+    --------
+    >>> from posedrift.skeleton import t_pose_joints
+    >>> level = t_pose_joints(1.75) * [1.0, -1.0, -1.0] + [0.0, 0.0, 3.0]
+    >>> np.round(world_up(level), 6).tolist()
+    [0.0, -1.0, 0.0]
+    >>> t = np.radians(20.0)  # the same person seen by a camera looking 20 degrees down
+    >>> tilt = np.array([[1, 0, 0], [0, np.cos(t), -np.sin(t)], [0, np.sin(t), np.cos(t)]])
+    >>> np.round(world_up(level @ tilt.T), 6).tolist() == np.round(tilt @ [0, -1, 0], 6).tolist()
+    True
+    """
+    if floor_normal is not None:
+        normal = np.asarray(floor_normal, dtype=float)
+        normal = normal / np.linalg.norm(normal)
+        return normal if normal @ CAMERA_UP >= 0 else -normal
+    joints = np.asarray(joints, dtype=float)
+    if not np.isfinite(joints).all():
+        return CAMERA_UP.copy()
+    standing = all(
+        _bend(joints[_J[f"{side}_hip"]], joints[_J[f"{side}_knee"]], joints[_J[f"{side}_foot"]])
+        < _STRAIGHT_KNEE_DEG
+        for side in ("right", "left")
+    )
+    if not standing:
+        return CAMERA_UP.copy()
+    line = joints[_J["neck"]] - 0.5 * (joints[_J["right_foot"]] + joints[_J["left_foot"]])
+    line = line / max(np.linalg.norm(line), 1e-12)
+    return line if line @ CAMERA_UP >= np.cos(np.radians(_UPRIGHT_DEG)) else CAMERA_UP.copy()
+
+
+def _bend(hip: np.ndarray, knee: np.ndarray, foot: np.ndarray) -> float:
+    """Degrees a leg bends at its knee (0: straight)."""
+    thigh, shank = knee - hip, foot - knee
+    cos = thigh @ shank / max(np.linalg.norm(thigh) * np.linalg.norm(shank), 1e-12)
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+
+def level_rotation(up: np.ndarray) -> np.ndarray:
+    """The rotation ``R`` taking a level camera's frame to this one's: ``R @ CAMERA_UP == up``.
+
+    The smallest such rotation (about ``CAMERA_UP x up``): a camera tilted down or
+    rolled, not turned. Row vectors in this camera's frame map to the level frame as
+    ``points @ R``.
+
+    Examples
+    --------
+    >>> t = np.radians(24.0)
+    >>> up = np.array([0.0, -np.cos(t), -np.sin(t)])  # a camera looking 24 degrees down
+    >>> bool(np.allclose(level_rotation(up) @ CAMERA_UP, up))
+    True
+    >>> bool(np.allclose(level_rotation(CAMERA_UP), np.eye(3)))
+    True
+    """
+    up = np.asarray(up, dtype=float)
+    up = up / np.linalg.norm(up)
+    axis = np.cross(CAMERA_UP, up)
+    sin, cos = float(np.linalg.norm(axis)), float(CAMERA_UP @ up)
+    if sin < 1e-12:
+        return np.eye(3) if cos > 0 else np.diag([1.0, -1.0, -1.0])
+    k = axis / sin
+    cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + sin * cross + (1.0 - cos) * (cross @ cross)
 
 
 # Limb bones measured between ring joints at calibration: child joint -> parent joint.

@@ -43,14 +43,17 @@ from posedrift.skeleton._fit import (
 from posedrift.skeleton._meanshift import part_modes
 from posedrift.tracking._health import Health, assess, unexplained_share
 from posedrift.tracking._init import (
+    CAMERA_UP,
     Calibration,
     LimbLengths,
     calibrate,
     geometric_labels,
     label_template_points,
+    level_rotation,
     measure_reach,
     measure_shoulders,
     smooth_labels,
+    world_up,
 )
 from posedrift.tracking._result import FrameResult, FrameStatus
 
@@ -70,6 +73,11 @@ _GATE_FRONT, _GATE_BEHIND = 1.2, 1.0
 # Frames between floor searches while none has been found: a static camera that showed no
 # floor shows none the next frame, and RANSAC's failed search costs 0.3 ms at 320 x 240.
 _FLOOR_RETRY = 15
+# A camera whose up (world_up) lies within 5 degrees of a level camera's is taken as level:
+# the forest's joint votes were learnt from cameras up to about 8 degrees off level (the
+# training views aim at the pelvis half the time), and on real recordings that begin
+# standing the estimate of up scatters by a few degrees (UTD-MHAD: -4 to 7).
+_LEVEL_COS = math.cos(math.radians(5.0))
 _MIN_WORKING_FOCAL = 190.0  # pixels; see working_decimation
 _RING_OFFSETS = sorted(
     ((dr, dc) for dr in range(-3, 4) for dc in range(-3, 4) if (dr, dc) != (0, 0)),
@@ -144,9 +152,16 @@ def _carry_joints(joints: np.ndarray, source: np.ndarray, moved: np.ndarray, fie
     return np.where(np.isfinite(warped), blended, rigid)
 
 
-def _facing(joints: np.ndarray) -> float:
-    """The facing yaw of a skeleton in degrees (NaN where it is incomplete)."""
-    return float(facing_yaw(joints)) if np.isfinite(joints).all() else math.nan
+def _facing(joints: np.ndarray, level: np.ndarray | None = None) -> float:
+    """The facing yaw of a skeleton in degrees (NaN where it is incomplete).
+
+    ``level``: :func:`level_rotation` of the world's up, for a camera that is not
+    level (None: level); the skeleton is turned into a level camera's frame, where
+    :func:`facing_yaw`'s default up holds.
+    """
+    if not np.isfinite(joints).all():
+        return math.nan
+    return float(facing_yaw(joints if level is None else joints @ level))
 
 
 def _units_hint(depth: np.ndarray) -> str:
@@ -493,6 +508,7 @@ class PoseTracker:
         self._person_depth: float | None = None
         self._floor: tuple[np.ndarray, float] | None = None
         self._floorless_frames = 0  # frames segmented while no floor plane is known
+        self._level_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._seed_registration = None
 
     @property
@@ -859,8 +875,14 @@ class PoseTracker:
             forest_parts, leaves = forest.predict_pixels(
                 depth, pixels, intr, mask=mask, return_leaves=True
             )
-            # Each point votes from where it lies, not from the pixel it was read at.
-            votes = forest.votes.cast(points, leaves, joints=VOTED_JOINTS)
+            # Each point votes from where it lies, not from the pixel it was read at. The
+            # votes' offsets were learnt from level cameras: cast in a level frame.
+            level = self._level()
+            if level is None:
+                votes = forest.votes.cast(points, leaves, joints=VOTED_JOINTS)
+            else:
+                where, *rest = forest.votes.cast(points @ level, leaves, joints=VOTED_JOINTS)
+                votes = (where @ level.T, *rest)
         if want_parts:
             reuse = want_votes and labeller is forest
             parts = (
@@ -971,7 +993,7 @@ class PoseTracker:
             smoothing=self.temporal_smoothing,
             shoulder_offset=cal.shoulders,
             exits=self._image_exits(points, labels),
-            facing=None if prediction is None else _facing(prediction),
+            facing=None if prediction is None else _facing(prediction, self._level()),
             **unanchored,
         )
         in_view = self._in_view(fit.joints)
@@ -1025,6 +1047,16 @@ class PoseTracker:
         return out
 
     # ------------------------------------------------------------------ initialization
+    def _level(self) -> np.ndarray | None:
+        """:func:`level_rotation` of the calibration's up; None before calibration or
+        for a camera within 5 degrees of level (``_LEVEL_COS``)."""
+        cal = self._calibration
+        if cal is None or cal.up @ CAMERA_UP > _LEVEL_COS:
+            return None
+        if self._level_cache is None or self._level_cache[0] is not cal.up:
+            self._level_cache = (cal.up, level_rotation(cal.up))
+        return self._level_cache[1]
+
     def _get_forest(self):
         """The forest, loaded on first use; "geometric" where none can be loaded."""
         if self.forest is None:
@@ -1050,7 +1082,7 @@ class PoseTracker:
             return self._get_forest()
         if hasattr(self.part_net, "select"):
             last = self._last_joints
-            return self.part_net.select(None if last is None else float(facing_yaw(last)))
+            return self.part_net.select(None if last is None else _facing(last, self._level()))
         return self.part_net
 
     def _initialize(self, depth, intr, mask, full, pixels, points, graph) -> _Attempt | None:
@@ -1147,4 +1179,8 @@ class PoseTracker:
             again = self._fit(points, labels2, graph, guess)
             if again.health.score <= attempt.health.score:
                 attempt = again
+        if fresh_calibration:  # The world's up, for a camera that looks down or up.
+            floor = None if self._floor is None else self._floor[0]
+            up = world_up(attempt.fit.joints, floor_normal=floor)
+            self._calibration = replace(self._calibration, up=up)
         return attempt
