@@ -76,6 +76,10 @@ for f in 90 180; do
     posedrift -q eval synthetic builtin "$M/cmu/007_03.bvh" --frames 300 --facing "$f" \
         --methods "$methods,shotton-net" --json "$out/facing_$f.json" | tee "$out/facing_$f.md"
 done
+# A camera mounted high (2.2 m) and looking 24 degrees down at the pelvis: the development and
+# held-out clips, 300 frames.
+posedrift -q eval synthetic builtin "${close_clips[@]}" --frames 300 --camera-height 2.2 \
+    --camera-tilt 24 --methods "$methods" --json "$out/tilt.json" | tee "$out/tilt.md"
 # Real Kinect recordings: one sequence per action, subject (a mod 4) + 1, trial 1.
 seqs=$(for a in $(seq 1 27); do printf "a%d_s%d_t1," "$a" $(( a % 4 + 1 )); done)
 posedrift -q eval utd "$data/utd-mhad" --sequences "${seqs%,}" --methods "$wide" \
