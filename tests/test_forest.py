@@ -265,9 +265,12 @@ def test_offset_bank_and_pixel_sampling_are_seeded():
     assert counts.min() >= 500 / 15 * 0.5
 
 
-def held_out_frames(mocap_dir, views) -> list[LabelledFrame]:
+def held_out_frames(
+    mocap_dir, views, *, camera_height: float = 1.0, aim_at_body: bool = False
+) -> list[LabelledFrame]:
     """Fresh renders of 007_01 (kept out of the shipped models' training), one per
-    ``(frame, yaw)`` of ``views``, the frame at 90 with Kinect-like noise."""
+    ``(frame, yaw)`` of ``views``, the frame at 90 with Kinect-like noise; the camera
+    level at ``camera_height`` or (``aim_at_body``) aimed at the pelvis from there."""
     from posedrift.labelling._train import render_training_frame
     from posedrift.synthetic import BodyModel, bvh_motion
 
@@ -288,8 +291,8 @@ def held_out_frames(mocap_dir, views) -> list[LabelledFrame]:
                 CAM,
                 yaw=yaw,
                 distance=2.8,
-                camera_height=1.0,
-                aim_at_body=False,
+                camera_height=camera_height,
+                aim_at_body=aim_at_body,
                 noise=t == 90,
                 rng=rng,
             )

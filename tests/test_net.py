@@ -248,6 +248,20 @@ def test_turned_net_labels_people_seen_from_behind(mocap_dir):
     assert label_accuracy(turned, facing)[0] >= 0.75
 
 
+def test_high_net_labels_people_seen_from_a_camera_looking_down(mocap_dir):
+    """The shipped high net on a held-out clip seen from 2.2 m, aimed at the pelvis (about
+    25 degrees down), where the frontal net, trained on near-level cameras, labels less."""
+    high, frontal = BodyPartNet.load_default("high"), BodyPartNet.load_default()
+    assert high.metadata["camera_heights"] == [0.7, 2.4]
+    views = ((30, 0.0), (90, 25.0), (140, -30.0), (120, 10.0))
+    above = held_out_frames(mocap_dir, views, camera_height=2.2, aim_at_body=True)
+    accuracy, _, _ = label_accuracy(high, above)
+    # measured: 0.931 (the frontal net 0.902)
+    assert accuracy >= 0.91 and accuracy > label_accuracy(frontal, above)[0] + 0.015
+    # measured level: 0.926 (the frontal net 0.935): why it is asked only from above
+    assert label_accuracy(high, held_out_frames(mocap_dir, views))[0] >= 0.9
+
+
 def test_facing_nets_choose_by_the_turn_and_label_frames_as_the_frontal_one(toy_net):
     other = BodyPartNet(toy_net.offsets, toy_net.weights, toy_net.biases, clip=toy_net.clip)
     nets = FacingNets(toy_net, other, turn_gate=45)
@@ -267,11 +281,21 @@ def test_facing_nets_choose_by_the_turn_and_label_frames_as_the_frontal_one(toy_
     for gate in (-1.0, 181.0, float("nan"), "30"):
         with pytest.raises(ValueError, match="'turn_gate' parameter of FacingNets"):
             FacingNets(toy_net, other, turn_gate=gate)
+    # A third net for a camera looking down takes the frontal net's place beyond high_gate.
+    high = BodyPartNet(toy_net.offsets, toy_net.weights, toy_net.biases, clip=toy_net.clip)
+    three = FacingNets(toy_net, other, high=high, high_gate=12.0)
+    assert three.select(10.0) is toy_net and three.select(10.0, tilt=12.0) is toy_net
+    assert three.select(10.0, tilt=12.5) is high and three.select(90.0, tilt=30.0) is other
+    assert nets.select(10.0, tilt=30.0) is toy_net  # no high net: the frontal one
+    for gate in (-1.0, 91.0, float("nan")):
+        with pytest.raises(ValueError, match="'high_gate' parameter of FacingNets"):
+            FacingNets(toy_net, other, high=high, high_gate=gate)
     with pytest.raises(ValueError, match="'views' parameter of BodyPartNet.load_default"):
         BodyPartNet.load_default("behind")
     shipped = FacingNets.load_default()
     assert shipped.frontal is BodyPartNet.load_default()
     assert shipped.turned is BodyPartNet.load_default("turned")
+    assert shipped.high is BodyPartNet.load_default("high") and shipped.high_gate == 12.0
 
 
 def test_cli_train_net_is_reproducible_and_checks_its_options(tmp_path):

@@ -735,9 +735,12 @@ def test_a_camera_looking_down_is_levelled_for_the_votes_and_the_facing(sequence
     assert np.degrees(np.arccos(tracker.calibration.up @ true_up)) < 2.0
     level = tracker._level()
     assert level is not None and np.degrees(np.arccos(level[1, 1])) == pytest.approx(24.0, abs=2)
-    # The facing is read in the level frame: the person faces the camera.
+    # The facing is read in the level frame: the person faces the camera. The net for a
+    # camera looking down labels the pixels once the calibration has measured the tilt.
     assert _facing(results[-1].joints, level) < 10.0
+    assert tracker._camera_tilt() == pytest.approx(24.0, abs=2)
+    assert tracker._get_labeller() is tracker.part_net.high
     # A level camera (within 5 degrees) keeps the level path, bit for bit what it was.
     flat = PoseTracker(K, rng=0)
     _run(flat, sequence.frames[:2])
-    assert flat._level() is None
+    assert flat._level() is None and flat._get_labeller() is flat.part_net.frontal

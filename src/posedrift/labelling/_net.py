@@ -53,12 +53,18 @@ FORMAT_VERSION = 1
 MAX_LAYERS = 16
 """Most layers a model file may hold."""
 
-_DEFAULT_MODELS = {"frontal": "part_net_default.npz", "turned": "part_net_turned.npz"}
+_DEFAULT_MODELS = {
+    "frontal": "part_net_default.npz",
+    "turned": "part_net_turned.npz",
+    "high": "part_net_high.npz",
+}
 """The shipped nets: trained on views within 45 (30% of them up to 100) degrees of
-frontal, and on views turned any way (``--wide-share 1 --wide-yaw 180``)."""
+frontal, on views turned any way (``--wide-share 1 --wide-yaw 180``), and on frontal
+views from cameras up to 2.4 m high (``--camera-heights 0.7,2.4``)."""
 _TRAIN_COMMANDS = {
     "frontal": "posedrift train --classifier net",
     "turned": "posedrift train --classifier net --wide-share 1 --wide-yaw 180",
+    "high": "posedrift train --classifier net --camera-heights 0.7,2.4",
 }
 _KEYS = ("part_names", "metadata", "reference_focal", "background", "clip", "offsets", "n_layers")
 """What a model file holds besides its format, version and layers."""
@@ -282,14 +288,17 @@ class BodyPartNet:
 
         Parameters
         ----------
-        views : {"frontal", "turned"}
+        views : {"frontal", "turned", "high"}
             ``"frontal"``: trained on people facing the camera (within 45 degrees,
             and 30% of the frames up to 100), the net that labels the tracker's
             pixels; ``"turned"``: trained on people turned any way, up to their back
             to the camera, which the tracker asks once its skeleton has turned away
             (:class:`FacingNets`). The turned net labels people who face the camera
             less well than the frontal one (0.83 against 0.94 of held-out pixels,
-            docs/RESULTS.md).
+            docs/RESULTS.md). ``"high"``: the frontal net's training with cameras
+            0.7-2.4 m high instead of 0.7-1.3 (half of them aimed at the pelvis),
+            asked in the frontal net's place where the camera looks down; on level
+            cameras it is the worse of the two (docs/RESULTS.md).
         """
         if views not in _DEFAULT_MODELS:
             raise ValueError(
@@ -346,7 +355,7 @@ class BodyPartNet:
 
 @dataclass(frozen=True, eq=False)
 class FacingNets:
-    """Two body-part nets, one chosen by which way the person faces the camera.
+    """Body-part nets, one chosen by which way the person faces the camera.
 
     Beyond the paper. A net trained on frontal views labels a person seen from
     behind as their mirror image; one trained on every view also reads real people
@@ -355,6 +364,9 @@ class FacingNets:
     that skeleton has turned more than ``turn_gate`` degrees away
     (:func:`posedrift.skeleton.facing_yaw`). Where nothing tells which way the
     person faces (a per-frame method, the first frame), it labels as ``frontal``.
+    Where ``high`` is given and the camera looks down more than ``high_gate``
+    degrees (the tracker measures the tilt at calibration,
+    :func:`posedrift.tracking.world_up`), ``high`` takes the frontal net's place.
 
     Parameters
     ----------
@@ -362,6 +374,11 @@ class FacingNets:
         Or anything with the net's ``predict`` and ``predict_pixels``.
     turn_gate : float
         Degrees in [0, 180].
+    high : BodyPartNet, optional
+        The frontal views' net for a camera mounted high and looking down.
+    high_gate : float
+        Degrees in [0, 90]: the shipped frontal net saw cameras up to about 8 degrees
+        off level, and real recordings from a level camera read up to 7.
 
     Examples
     --------
@@ -370,37 +387,46 @@ class FacingNets:
     (True, True)
     >>> nets.select(float("nan")) is nets.frontal  # no skeleton to tell
     True
+    >>> nets.select(10.0, tilt=24.0) is nets.high  # a camera looking 24 degrees down
+    True
     """
 
     frontal: Any
     turned: Any
     turn_gate: float = 45.0
+    high: Any = None
+    high_gate: float = 12.0
 
     def __post_init__(self) -> None:
-        gate = check_scalar(
-            self.turn_gate,
-            "turn_gate",
-            low=0.0,
-            high=180.0,
-            include_low=True,
-            include_high=True,
-            caller="FacingNets",
-        )
-        object.__setattr__(self, "turn_gate", float(gate))
+        for name, top in (("turn_gate", 180.0), ("high_gate", 90.0)):
+            gate = check_scalar(
+                getattr(self, name),
+                name,
+                low=0.0,
+                high=top,
+                include_low=True,
+                include_high=True,
+                caller="FacingNets",
+            )
+            object.__setattr__(self, name, float(gate))
 
     @classmethod
     def load_default(cls, turn_gate: float = 45.0) -> FacingNets:
-        """The shipped frontal and turned nets (:meth:`BodyPartNet.load_default`)."""
+        """The shipped frontal, turned and high nets (:meth:`BodyPartNet.load_default`)."""
         return cls(
             BodyPartNet.load_default("frontal"),
             BodyPartNet.load_default("turned"),
             turn_gate=turn_gate,
+            high=BodyPartNet.load_default("high"),
         )
 
-    def select(self, facing_yaw: float | None) -> Any:
-        """The net for a person turned ``facing_yaw`` degrees away (None, NaN: frontal)."""
+    def select(self, facing_yaw: float | None, *, tilt: float | None = None) -> Any:
+        """The net for a person turned ``facing_yaw`` degrees away (None, NaN: frontal),
+        seen by a camera looking ``tilt`` degrees down (None: level)."""
         if facing_yaw is not None and facing_yaw > self.turn_gate:  # NaN compares False
             return self.turned
+        if self.high is not None and tilt is not None and tilt > self.high_gate:
+            return self.high
         return self.frontal
 
     def predict(

@@ -1057,6 +1057,13 @@ class PoseTracker:
             self._level_cache = (cal.up, level_rotation(cal.up))
         return self._level_cache[1]
 
+    def _camera_tilt(self) -> float | None:
+        """Degrees the camera looks down, from the calibration's up (None before it)."""
+        if self._calibration is None:
+            return None
+        up = self._calibration.up
+        return math.degrees(math.atan2(-float(up[2]), -float(up[1])))
+
     def _get_forest(self):
         """The forest, loaded on first use; "geometric" where none can be loaded."""
         if self.forest is None:
@@ -1082,7 +1089,8 @@ class PoseTracker:
             return self._get_forest()
         if hasattr(self.part_net, "select"):
             last = self._last_joints
-            return self.part_net.select(None if last is None else _facing(last, self._level()))
+            facing = None if last is None else _facing(last, self._level())
+            return self.part_net.select(facing, tilt=self._camera_tilt())
         return self.part_net
 
     def _initialize(self, depth, intr, mask, full, pixels, points, graph) -> _Attempt | None:
