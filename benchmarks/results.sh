@@ -80,6 +80,9 @@ done
 # held-out clips, 300 frames.
 posedrift -q eval synthetic builtin "${close_clips[@]}" --frames 300 --camera-height 2.2 \
     --camera-tilt 24 --methods "$methods" --json "$out/tilt.json" | tee "$out/tilt.md"
+posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" "$M/cmu/007_03.bvh" --frames 300 --noise \
+    --room --camera-height 2.2 --camera-tilt 24 --methods cpd,icp --json "$out/tilt_room.json" \
+    | tee "$out/tilt_room.md"
 # Real Kinect recordings: one sequence per action, subject (a mod 4) + 1, trial 1.
 seqs=$(for a in $(seq 1 27); do printf "a%d_s%d_t1," "$a" $(( a % 4 + 1 )); done)
 posedrift -q eval utd "$data/utd-mhad" --sequences "${seqs%,}" --methods "$wide" \
