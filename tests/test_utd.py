@@ -229,3 +229,26 @@ def test_floating_point_depth_is_metres(tmp_path):
     b = load_utd_sequence(m_depth, skel).frames[0].depth
     np.testing.assert_allclose(b, a, atol=1e-6)
     assert abs(float(a.max()) - 2.873) < 1e-6  # metres
+
+
+@pytest.mark.data
+def test_real_recordings_read_a_level_camera_and_a_seated_start_gives_no_tilt(utd_dir):
+    """The world's up on real Kinect recordings: a person standing at the first frame reads
+    the level camera within its 5-degree dead zone (the tracker's level path), and one who
+    begins seated (a24, sit to stand) gives no estimate at all."""
+    from posedrift.tracking import PoseTracker
+    from posedrift.tracking._init import CAMERA_UP
+
+    found, _ = find_utd_sequences(utd_dir, names=["a1_s2_t1", "a4_s1_t1", "a24_s1_t1"])
+    tilts = {}
+    for name, depth, skeleton in found:
+        seq = load_utd_sequence(depth, skeleton, name=name)
+        tracker = PoseTracker(seq.frames[0].intrinsics, rng=0)
+        for frame in seq.frames[:2]:
+            tracker.process(frame)
+        tilts[name] = tracker._camera_tilt()
+        if name == "a24_s1_t1":
+            np.testing.assert_array_equal(tracker.calibration.up, CAMERA_UP)
+        else:  # measured: 3.3 and 2.3 degrees
+            assert abs(tilts[name]) < 5.0 and tracker._level() is None
+    assert len(tilts) == 3
