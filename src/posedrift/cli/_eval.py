@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from posedrift.cli._app import eval_app, fail, progress_enabled
-from posedrift.cli._options import NetOption, TurnedNetOption, load_part_net
+from posedrift.cli._options import CameraTiltOption, NetOption, TurnedNetOption, load_part_net
 
 _METHODS_HELP = (
     "Comma-separated methods: cpd, shotton, pda, icp, shotton-net (Shotton's joints from "
@@ -106,14 +106,7 @@ def eval_synthetic(
             "--camera-height", help="Camera height above the floor, metres (default 1.0)."
         ),
     ] = None,
-    camera_tilt: Annotated[
-        float,
-        typer.Option(
-            "--camera-tilt",
-            help="Degrees the camera looks down, in (-90, 90) (negative: up; 0, level, is the "
-            "protocol).",
-        ),
-    ] = 0.0,
+    camera_tilt: CameraTiltOption = 0.0,
     in_place: Annotated[
         bool,
         typer.Option(

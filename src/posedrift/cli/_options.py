@@ -37,7 +37,7 @@ NetOption = Annotated[
     typer.Option(
         "--net",
         help="Body-part net file that labels the trackers' pixels (default: the shipped "
-        "frontal and turned nets); 'none' leaves the labels to the forest.",
+        "frontal, turned and high nets); 'none' leaves the labels to the forest.",
     ),
 ]
 TurnedNetOption = Annotated[
@@ -46,6 +46,14 @@ TurnedNetOption = Annotated[
         "--turned-net",
         help="Body-part net file that takes over once the skeleton turns away (default: "
         "the shipped one, unless --net names a file); 'none': the --net net for every view.",
+    ),
+]
+CameraTiltOption = Annotated[
+    float,
+    typer.Option(
+        "--camera-tilt",
+        help="Degrees the camera looks down, in (-90, 90) (negative: up; 0: level, the "
+        "protocol's).",
     ),
 ]
 FpsOption = Annotated[

@@ -9,6 +9,7 @@ from typing import Annotated
 import typer
 
 from posedrift.cli._app import app, fail, progress_enabled
+from posedrift.cli._options import CameraTiltOption
 
 
 def _parse_size(text: str) -> tuple[int, int]:
@@ -60,13 +61,7 @@ def synth(
     camera_height: Annotated[
         float, typer.Option("--camera-height", help="Camera height above the floor, metres.")
     ] = 1.0,
-    camera_tilt: Annotated[
-        float,
-        typer.Option(
-            "--camera-tilt",
-            help="Degrees the camera looks down, in (-90, 90) (negative: up; 0: level).",
-        ),
-    ] = 0.0,
+    camera_tilt: CameraTiltOption = 0.0,
     noise: Annotated[
         bool, typer.Option("--noise/--no-noise", help="Kinect v1-like depth noise.")
     ] = False,
