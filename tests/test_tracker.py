@@ -740,6 +740,11 @@ def test_a_camera_looking_down_is_levelled_for_the_votes_and_the_facing(sequence
     assert _facing(results[-1].joints, level) < 10.0
     assert tracker._camera_tilt() == pytest.approx(24.0, abs=2)
     assert tracker._get_labeller() is tracker.part_net.high
+    # Switched off (method cpd-level), every camera is taken for level, as before.
+    assumed = PoseTracker(K, rng=0, measure_tilt=False)
+    _run(assumed, high.frames)
+    assert assumed._level() is None and assumed._camera_tilt() is None
+    assert assumed._get_labeller() is assumed.part_net.frontal
     # A level camera (within 5 degrees) keeps the level path, bit for bit what it was.
     flat = PoseTracker(K, rng=0)
     _run(flat, sequence.frames[:2])

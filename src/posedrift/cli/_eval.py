@@ -17,6 +17,7 @@ _METHODS_HELP = (
     "icp-paper (the paper's pure tracking, no per-frame evidence), "
     "cpd-norelabel, cpd-novotes (no joint votes), cpd-rigid, cpd-cold, cpd-reinit (a failed "
     "track always re-initialized), cpd-nofallback (CPD alone, no ICP second opinion), "
+    "cpd-level (every camera taken for level: no tilt measured, no high net), "
     "cpd-200, cpd-400, cpd-800, cpd-fullres."
 )
 

@@ -158,6 +158,10 @@ METHODS: dict[str, tuple[str, MethodFactory]] = {
         "ablation: CPD alone, without the ICP second opinion on doubtful frames",
         _tracker(icp_fallback=None),
     ),
+    "cpd-level": (
+        "ablation: every camera taken for level (no tilt measured, no high net)",
+        _tracker(measure_tilt=False),
+    ),
     "cpd-200": ("ablation: 200 points", _tracker(n_points=200)),
     "cpd-400": ("ablation: 400 points (the default)", _tracker(n_points=400)),
     "cpd-800": ("ablation: 800 points", _tracker(n_points=800)),

@@ -316,6 +316,12 @@ class PoseTracker:
         the development clips it ran on 18% of the frames and was kept on 0.8%
         (docs/RESULTS.md). None: CPD alone. Needs the per-point probabilities (see
         ``appearance_weight``); ignored with ``correspondence="icp"``.
+    measure_tilt : bool
+        Measure at calibration which way is up (:func:`~posedrift.tracking.world_up`:
+        the floor, or the standing skeleton) and, for a camera more than 5 degrees off
+        level, cast the joint votes and read the facing yaw in a level camera's frame,
+        and beyond 12 degrees down ask ``part_net``'s high net (beyond the paper;
+        docs/RESULTS.md, "A camera mounted high"). False takes every camera for level.
     rng : int or Generator
         Seeds downsampling and RANSAC (runs are repeatable for an int).
 
@@ -366,6 +372,7 @@ class PoseTracker:
         calibration_frames: int = 30,
         keep_better_track: bool = True,
         icp_fallback: float | None = 0.08,
+        measure_tilt: bool = True,
         rng: int | np.random.Generator | None = 0,
     ) -> None:
         caller = "PoseTracker"
@@ -451,6 +458,7 @@ class PoseTracker:
             caller=caller,
         )
         self.keep_better_track = bool(keep_better_track)
+        self.measure_tilt = bool(measure_tilt)
         if icp_fallback is not None:
             icp_fallback = check_scalar(
                 icp_fallback,
@@ -1051,15 +1059,16 @@ class PoseTracker:
         """:func:`level_rotation` of the calibration's up; None before calibration or
         for a camera within 5 degrees of level (``_LEVEL_COS``)."""
         cal = self._calibration
-        if cal is None or cal.up @ CAMERA_UP > _LEVEL_COS:
+        if not self.measure_tilt or cal is None or cal.up @ CAMERA_UP > _LEVEL_COS:
             return None
         if self._level_cache is None or self._level_cache[0] is not cal.up:
             self._level_cache = (cal.up, level_rotation(cal.up))
         return self._level_cache[1]
 
     def _camera_tilt(self) -> float | None:
-        """Degrees the camera looks down, from the calibration's up (None before it)."""
-        if self._calibration is None:
+        """Degrees the camera looks down, from the calibration's up (None before it, or
+        without ``measure_tilt``)."""
+        if not self.measure_tilt or self._calibration is None:
             return None
         up = self._calibration.up
         return math.degrees(math.atan2(-float(up[2]), -float(up[1])))
