@@ -184,9 +184,14 @@ def test_in_view_splits_the_errors_on_angles_whose_joints_leave_the_image():
         "out_of_view_angle_error_mean_deg": pytest.approx(90.0, abs=1e-3),
     }
     assert row["angle_error_deg"]["left_elbow"] == pytest.approx(45.0, abs=1e-3)
-    assert "6.2% of the reference's angles have a joint outside the image" in markdown_table(
-        report, paper=False
-    )
+    text = markdown_table(report, paper=False)
+    assert "6.2% of the reference's angles have a joint outside the image" in text
+    # The same error as a bias: the T-pose reads that elbow straighter by 0 and 90 degrees.
+    elbow = row["angle_agreement"]["left_elbow"]
+    assert elbow["frames"] == 6 and elbow["bias_deg"] == pytest.approx(45.0, abs=1e-3)
+    assert elbow["sd_deg"] == pytest.approx(np.sqrt(6 * 45.0**2 / 5), abs=1e-3)
+    assert row["angle_agreement"]["right_knee"]["loa_high_deg"] == pytest.approx(0.0, abs=1e-9)
+    assert "| still | +45.0 (-51.6, +141.6) | +0.0 (+0.0, +0.0) |" in text
 
 
 def test_parse_methods():

@@ -5,6 +5,7 @@ import pytest
 
 from posedrift.camera import camera_preset
 from posedrift.evaluation import (
+    angle_agreement,
     angle_errors,
     angles_in_view,
     failed_frames,
@@ -79,6 +80,46 @@ def test_failed_frames_and_fill_forward():
 def test_angle_errors_rejects_bad_shapes(est, ref, match):
     with pytest.raises(ValueError, match=match):
         angle_errors(est, ref)
+
+
+def test_angle_agreement_identity_is_no_bias_and_no_spread():
+    ref = np.random.default_rng(0).uniform(0.0, 180.0, (50, 8))
+    for row in angle_agreement(ref.copy(), ref).values():
+        assert row == {
+            "bias_deg": 0.0,
+            "sd_deg": 0.0,
+            "loa_low_deg": 0.0,
+            "loa_high_deg": 0.0,
+            "frames": 50,
+        }
+
+
+def test_angle_agreement_recovers_a_known_offset_and_scatter():
+    rng = np.random.default_rng(1)
+    ref = rng.uniform(0.0, 180.0, (20_000, 8))
+    diff = 2.0 + 3.0 * rng.standard_normal(ref.shape)
+    est = ref + diff
+    est[:10, 5] = np.nan  # left out, not counted
+    out = angle_agreement(est, ref)
+    for k, name in enumerate(ANGLE_NAMES):
+        row = out[name]
+        assert row["bias_deg"] == pytest.approx(2.0, abs=0.1)  # 4.5 standard errors
+        assert row["sd_deg"] == pytest.approx(3.0, abs=0.1)
+        d = diff[np.isfinite(est[:, k]), k]
+        inside = np.mean((d >= row["loa_low_deg"]) & (d <= row["loa_high_deg"]))
+        assert inside == pytest.approx(0.95, abs=0.01)
+    assert out["right_knee"]["frames"] == 20_000 - 10
+    assert out["left_knee"]["frames"] == 20_000
+
+
+def test_angle_agreement_needs_two_frames_and_the_right_shape():
+    ref = np.full((3, 8), 90.0)
+    est = ref.copy()
+    est[1:, 2] = np.nan  # one frame left for the left shoulder
+    row = angle_agreement(est, ref)["left_shoulder"]
+    assert row["frames"] == 1 and row["bias_deg"] is None and row["loa_high_deg"] is None
+    with pytest.raises(ValueError, match="angle_agreement must have shape \\(T, 8\\)"):
+        angle_agreement(np.zeros((3, 7)), np.zeros((3, 7)))
 
 
 def test_joint_metrics_reject_bad_input():

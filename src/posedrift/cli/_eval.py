@@ -171,8 +171,9 @@ def eval_synthetic(
     320 x 240 with the person 2.8 m away (the default body, or the --height and
     --girth asked for; another camera with --camera and --distance); the methods
     see only the depth frames.
-    Prints the table in Markdown; a clip that cannot be read or mapped is named,
-    skipped, and makes the exit status 1. A source given twice (the same file) is
+    Prints the table in Markdown, then each angle's bias and 95% limits of
+    agreement; a clip that cannot be read or mapped is named, skipped, and makes
+    the exit status 1. A source given twice (the same file) is
     evaluated once; files of the same name in different folders get distinct
     sequence names (x, x-2, ...), each said on standard error.
 

@@ -16,6 +16,7 @@ from posedrift.evaluation._harness import (
     unusable_reason,
 )
 from posedrift.evaluation._metrics import (
+    angle_agreement,
     angle_errors,
     angles_in_view,
     failed_frames,
@@ -45,6 +46,7 @@ __all__ = [
     "EvaluationSequence",
     "MethodRun",
     "Reference",
+    "angle_agreement",
     "angle_errors",
     "angles_in_view",
     "evaluate",

@@ -21,6 +21,7 @@ import numpy as np
 from posedrift._validation import check_scalar
 from posedrift.camera import DepthFrame, Intrinsics, project
 from posedrift.evaluation._metrics import (
+    angle_agreement,
     angle_errors,
     angles_in_view,
     failed_frames,
@@ -683,7 +684,9 @@ def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
 
     Errors are computed over all frames of all sequences together; failed frames
     (no pose) are counted and left out of the error means. Extra fields beyond
-    section 6: per method ``"filled"`` (the same errors with each failed frame
+    section 6: per method ``"angle_agreement"`` (each angle's bias and 95% limits of
+    agreement with the reference, :func:`~posedrift.evaluation.angle_agreement`),
+    ``"filled"`` (the same errors with each failed frame
     filled by the last known pose), ``"per_sequence"``, ``"method_errors"``
     (exceptions a method raised, counted as failed frames) and ``"status_counts"``
     (frames per :class:`~posedrift.tracking.FrameStatus`), ``"by_view"`` (the mean
@@ -715,9 +718,14 @@ def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
         hits = sum(r.label_hits for r in per)
         counted = sum(r.label_total for r in per)
         seconds = sum(r.seconds for r in per)
-        errors = angle_errors(joint_angles(est), ref_angles)
+        est_angles = joint_angles(est)
+        errors = angle_errors(est_angles, ref_angles)
         row = {
             "angle_error_deg": {k: _round(v) for k, v in errors.items()},
+            "angle_agreement": {
+                angle: {k: v if k == "frames" else _round(v) for k, v in values.items()}
+                for angle, values in angle_agreement(est_angles, ref_angles).items()
+            },
             "mpjpe_mm": _round(mpjpe_mm(est, ref), 2),
             "map_10cm": _round(map_at(est, ref, 0.10)),
             "label_accuracy": _round(hits / counted) if counted else None,
@@ -737,7 +745,7 @@ def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
             "method_errors": sum(len(r.errors) for r in per),
             "status_counts": _status_counts(per),
             "by_view": _by_view(est, ref, ref_angles),
-            "in_view": _in_view(joint_angles(est), ref_angles, in_view),
+            "in_view": _in_view(est_angles, ref_angles, in_view),
         }
         if convention != "native":
             raw = np.concatenate(native)

@@ -71,6 +71,53 @@ def angle_errors(est_angles: np.ndarray, ref_angles: np.ndarray) -> dict[str, fl
     return out
 
 
+def angle_agreement(est_angles: np.ndarray, ref_angles: np.ndarray) -> dict[str, dict]:
+    """Bland-Altman agreement of each angle with the reference: bias and 95% limits.
+
+    A mean absolute error mixes a constant offset with frame-to-frame scatter; a
+    clinician comparing a measuring tool against a reference asks for them apart
+    (Bland and Altman, Lancet 1986). Per angle: ``bias_deg``, the mean signed
+    difference ``est - ref`` (positive: the estimate reads the joint straighter, or
+    the limb further from the trunk, than it is); ``sd_deg``, the differences'
+    sample standard deviation; ``loa_low_deg`` and ``loa_high_deg``, the limits of
+    agreement ``bias -/+ 1.96 sd``, between which about 95% of the differences lie;
+    ``frames``, how many frames had both angles. Values are None where fewer than
+    two frames did.
+
+    Parameters
+    ----------
+    est_angles, ref_angles : (T, 8) float
+        Degrees, in :data:`posedrift.skeleton.ANGLE_NAMES` order; NaN where unknown.
+
+    Returns
+    -------
+    agreement : dict
+        ``{angle_name: {"bias_deg", "sd_deg", "loa_low_deg", "loa_high_deg", "frames"}}``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ref = np.full((4, 8), 90.0); est = ref + [[1.0], [3.0], [1.0], [3.0]]
+    >>> row = angle_agreement(est, ref)["left_elbow"]
+    >>> row["bias_deg"], round(row["sd_deg"], 3), row["frames"]
+    (2.0, 1.155, 4)
+    """
+    est = np.asarray(est_angles, dtype=float)
+    ref = np.asarray(ref_angles, dtype=float)
+    _check_same_shape(est, ref, (0, len(ANGLE_NAMES)), "angle_agreement")
+    out: dict[str, dict] = {}
+    for k, name in enumerate(ANGLE_NAMES):
+        d = est[:, k] - ref[:, k]
+        d = d[np.isfinite(d)]
+        row: dict = dict.fromkeys(("bias_deg", "sd_deg", "loa_low_deg", "loa_high_deg"))
+        if d.size >= 2:
+            bias, sd = float(d.mean()), float(d.std(ddof=1))
+            half = 1.96 * sd  # the 97.5% quantile of a normal spread
+            row.update(bias_deg=bias, sd_deg=sd, loa_low_deg=bias - half, loa_high_deg=bias + half)
+        out[name] = {**row, "frames": int(d.size)}
+    return out
+
+
 def joint_errors_m(est: np.ndarray, ref: np.ndarray) -> np.ndarray:
     """Euclidean distance per frame and joint, ``(T, 15)`` metres, NaN where either is unknown."""
     est = np.asarray(est, dtype=float)

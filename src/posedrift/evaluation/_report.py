@@ -45,6 +45,37 @@ def _in_view_note(report: Mapping) -> str:
     )
 
 
+def _signed(value: float | None) -> str:
+    return "-" if value is None else f"{value:+.1f}"
+
+
+def _agreement_table(report: Mapping) -> str:
+    """Each method's bias and 95% limits of agreement per angle, where the report has them."""
+    rows = {
+        name: row["angle_agreement"]
+        for name, row in report["methods"].items()
+        if "angle_agreement" in row
+    }
+    if not rows:
+        return ""
+    lines = [
+        "\nAgreement with the reference (Bland-Altman), degrees: bias, estimate minus "
+        "reference (95% limits of agreement).\n",
+        "| Method | " + " | ".join(_HEADERS[a] for a in ANGLE_NAMES) + " |",
+        "|" + "|".join(["---"] + ["---:"] * len(ANGLE_NAMES)) + "|",
+    ]
+    for name, agreement in rows.items():
+        cells = [name]
+        for angle in ANGLE_NAMES:
+            a = agreement.get(angle, {})
+            cell = _signed(a.get("bias_deg"))
+            if a.get("loa_low_deg") is not None:
+                cell += f" ({_signed(a['loa_low_deg'])}, {_signed(a['loa_high_deg'])})"
+            cells.append(cell)
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def markdown_table(report: Mapping, *, paper: bool = True) -> str:
     """Table 1 of the paper for one evaluation (the JSON of ``posedrift eval``).
 
@@ -54,6 +85,8 @@ def markdown_table(report: Mapping, *, paper: bool = True) -> str:
     its mean over the runs and their standard deviation (``mean ± sd``). Where some of
     the reference's angles have a joint outside the image, a line under the table
     gives each method's error over the angles in view and over the rest (``in_view``).
+    A second table gives each angle's bias and 95% limits of agreement
+    (``angle_agreement``), where the report has them.
 
     Parameters
     ----------
@@ -124,4 +157,4 @@ def markdown_table(report: Mapping, *, paper: bool = True) -> str:
             "\nRows marked *paper* are the paper's Table 1, measured on its own synthetic data "
             "(not available); they are not comparable frame for frame with the rows above.\n"
         )
-    return text
+    return text + _agreement_table(report)
