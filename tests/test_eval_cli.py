@@ -351,7 +351,12 @@ def test_figures_are_written(tmp_path):
         figures_dir=tmp_path,
     )
     names = sorted(p.split("/")[-1] for p in report["figures"])
-    assert names == ["fig12_overlays_toy.png", "fig6_labels_toy.png", "fig9_angles_toy.png"]
+    assert names == [
+        "bland_altman.png",
+        "fig12_overlays_toy.png",
+        "fig6_labels_toy.png",
+        "fig9_angles_toy.png",
+    ]
     for p in report["figures"]:
         with open(p, "rb") as f:
             assert f.read(8) == b"\x89PNG\r\n\x1a\n"

@@ -110,7 +110,8 @@ def test_demo_runs_and_writes_its_outputs(tmp_path):
     assert report["methods"]["cpd"]["angle_error_deg"]["mean"] < 15.0
     for name in ("poses.json", "angles.png", "tracking.gif", "viewer.html"):
         assert (out / name).stat().st_size > 0, name
-    assert len(list((out / "figures").glob("*.png"))) == 3
+    assert len(list((out / "figures").glob("*.png"))) == 4  # Fig. 9, 6, 12, Bland-Altman
+    assert (out / "figures" / "bland_altman.png").stat().st_size > 0
 
 
 def test_track_and_view_a_synth_folder(sequence, tmp_path):

@@ -137,7 +137,8 @@ def eval_synthetic(
         Path | None, typer.Option("--json", help="Write the results (JSON) here.")
     ] = None,
     figures: Annotated[
-        Path | None, typer.Option("--figures", help="Write Fig. 9, 6 and 12 (PNG) here.")
+        Path | None,
+        typer.Option("--figures", help="Write Fig. 9, 6, 12 and a Bland-Altman plot (PNG) here."),
     ] = None,
     seed: Annotated[
         int, typer.Option("--seed", help="Seed of the depth noise (clip i uses seed + i).")
@@ -338,7 +339,8 @@ def eval_utd(
         int | None, typer.Option("--limit", min=1, help="Only the first N sequences.")
     ] = None,
     figures: Annotated[
-        Path | None, typer.Option("--figures", help="Write Fig. 9 and 12 (PNG) here.")
+        Path | None,
+        typer.Option("--figures", help="Write Fig. 9, 12 and a Bland-Altman plot (PNG) here."),
     ] = None,
     paper: Annotated[
         bool, typer.Option("--paper/--no-paper", help="Show the paper's rows for reference.")

@@ -1,5 +1,6 @@
 """Figures of an evaluation: the paper's Fig. 9 (angles over frames), Fig. 6 (label
-maps) and Fig. 12 (skeletons on hard frames), as PNG files."""
+maps) and Fig. 12 (skeletons on hard frames), and a Bland-Altman plot of every angle,
+as PNG files."""
 
 from __future__ import annotations
 
@@ -8,11 +9,14 @@ from pathlib import Path
 import numpy as np
 
 from posedrift.camera import Intrinsics, project
+from posedrift.evaluation._metrics import angle_agreement
 from posedrift.skeleton import (
     ANGLE_NAMES,
     JOINT_INDEX,
     JOINT_PARENTS,
     PART_COLOURS,
+    joint_angles,
+    to_convention,
 )
 
 _COLOURS = ("tab:red", "tab:blue", "tab:purple", "tab:orange", "tab:brown", "tab:pink", "tab:cyan")
@@ -53,6 +57,53 @@ def angle_figure(run, sequence: str, path: Path) -> Path:
     axes[0, 0].legend(loc="lower left", fontsize=8, ncol=2)
     fig.suptitle(f"Estimated (solid) and {kind} (dashed) joint angles: {sequence}")
     fig.tight_layout(rect=(0, 0, 1, 0.97))
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path
+
+
+def agreement_figure(run, path: Path, *, convention: str = "native") -> Path:
+    """Bland-Altman plot of each angle over every sequence: difference against mean.
+
+    One panel per angle, one colour per method: each frame's ``est - ref`` against
+    ``(est + ref) / 2``, with the method's bias (solid) and 95% limits of agreement
+    (dotted) as :func:`~posedrift.evaluation.angle_agreement` gives them; the angles
+    are the scored ones (joints moved to ``convention`` first, as the report does).
+    """
+    plt = _pyplot()
+    ref = np.concatenate([r.reference.angles for r in run.sequences])
+    kind = "ground truth" if run.sequences[0].reference.kind == "synthetic" else "Kinect"
+    fig, axes = plt.subplots(2, 4, figsize=(16, 7.5), sharey=True)
+    for i, method in enumerate(run.methods):
+        joints = [run.runs[(method, r.name)].joints for r in run.sequences]
+        est = joint_angles(np.concatenate([to_convention(j, convention) for j in joints]))
+        agreement = angle_agreement(est, ref)
+        style = {"color": _COLOURS[i % len(_COLOURS)], "zorder": 3 + len(run.methods) - i}
+        for k, (ax, name) in enumerate(zip(axes.ravel(), ANGLE_NAMES, strict=True)):
+            # The first method (the tracker) is drawn on top of the others.
+            mean, diff = (est[:, k] + ref[:, k]) / 2, est[:, k] - ref[:, k]
+            ax.scatter(mean, diff, s=2, alpha=0.25, rasterized=True, **style)
+            row = agreement[name]
+            if row["bias_deg"] is None:
+                continue
+            ax.axhline(row["bias_deg"], lw=1.4, label=f"{method} {row['bias_deg']:+.1f}", **style)
+            for limit in (row["loa_low_deg"], row["loa_high_deg"]):
+                ax.axhline(limit, lw=1.0, ls=":", **style)
+    for ax, name in zip(axes.ravel(), ANGLE_NAMES, strict=True):
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_title(name.replace("_", " "))
+        ax.set_xlim(-5, 185)
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper right", fontsize=7, title="bias", title_fontsize=7)
+    for ax in axes[:, 0]:
+        ax.set_ylabel(f"estimate - {kind} (degrees)")
+    for ax in axes[-1]:
+        ax.set_xlabel(f"mean of estimate and {kind} (degrees)")
+    frames = len(ref)
+    fig.suptitle(
+        f"Agreement with the {kind}: bias (solid) and 95% limits (dotted), {frames} frames"
+    )
+    fig.tight_layout(rect=(0, 0, 1, 0.96))
     fig.savefig(path, dpi=80)
     plt.close(fig)
     return path
@@ -288,8 +339,11 @@ def overlay_figure(run, sequence: str, path: Path, frames: list[int]) -> Path | 
     return path
 
 
-def write_figures(run, out_dir: str | Path, *, max_sequences: int = 3, forest=None) -> list[Path]:
-    """Write Fig. 9, 6 and 12 for the first ``max_sequences`` sequences of a run.
+def write_figures(
+    run, out_dir: str | Path, *, max_sequences: int = 3, forest=None, convention: str = "native"
+) -> list[Path]:
+    """Write Fig. 9, 6 and 12 for the first ``max_sequences`` sequences of a run, and
+    the Bland-Altman plot of all of them (:func:`agreement_figure`).
 
     Returns
     -------
@@ -309,4 +363,5 @@ def write_figures(run, out_dir: str | Path, *, max_sequences: int = 3, forest=No
         p = overlay_figure(run, record.name, out / f"fig12_overlays_{name}.png", frames)
         if p is not None:
             written.append(p)
+    written.append(agreement_figure(run, out / "bland_altman.png", convention=convention))
     return written

@@ -785,7 +785,8 @@ def evaluate(
     progress : bool
         Progress bar on standard error.
     figures_dir : path, optional
-        Write the figures (Fig. 9, 6, 12 of the paper) there as PNG files.
+        Write the figures (Fig. 9, 6, 12 of the paper, and a Bland-Altman plot) there
+        as PNG files.
     protocol : str, optional
         ``"synthetic"`` or ``"utd"`` (inferred by default).
     convention : str
@@ -851,7 +852,8 @@ def evaluate(
     if figures_dir is not None:
         from posedrift.evaluation._figures import write_figures
 
-        report["figures"] = [str(p) for p in write_figures(run, figures_dir, forest=run.forest)]
+        written = write_figures(run, figures_dir, forest=run.forest, convention=convention)
+        report["figures"] = [str(p) for p in written]
     return report
 
 
