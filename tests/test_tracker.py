@@ -359,6 +359,8 @@ def test_errors_and_protocol(sequence):
         PoseTracker(K, n_points=5)
     with pytest.raises(ValueError, match="'icp_fallback' parameter of PoseTracker"):
         PoseTracker(K, icp_fallback=1.5)
+    with pytest.raises(ValueError, match="'blas_threads' parameter of PoseTracker"):
+        PoseTracker(K, blas_threads=0)
     with pytest.raises(ValueError, match="'intrinsics' argument of PoseTracker"):
         PoseTracker((1, 2, 3))
     tracker = PoseTracker(K, forest=LabelImages(sequence))
@@ -749,3 +751,27 @@ def test_a_camera_looking_down_is_levelled_for_the_votes_and_the_facing(sequence
     flat = PoseTracker(K, rng=0)
     _run(flat, sequence.frames[:2])
     assert flat._level() is None and flat._get_labeller() is flat.part_net.frontal
+
+
+def _blas_threads() -> set[int]:
+    from threadpoolctl import threadpool_info
+
+    return {pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"}
+
+
+@pytest.mark.parametrize("limit", [1, None])
+def test_a_frame_is_processed_with_the_blas_threads_asked_for(sequence, monkeypatch, limit):
+    """One BLAS thread by default (the part net's small products; RESULTS.md, speed);
+    None leaves the library's setting. Either way the setting is restored after."""
+    from threadpoolctl import threadpool_limits
+
+    seen = []
+    tracker = PoseTracker(K, forest=LabelImages(sequence), blas_threads=limit)
+    process = tracker._process
+    monkeypatch.setattr(tracker, "_process", lambda *a: seen.append(_blas_threads()) or process(*a))
+    with threadpool_limits(limits=2, user_api="blas"):
+        outside = _blas_threads()
+        result = tracker.process(sequence.frames[0])
+        assert _blas_threads() == outside
+    assert result.has_pose
+    assert seen == [{1} if limit == 1 else outside]

@@ -297,10 +297,8 @@ def _measure(run, source, target, truth, repeats, first=None):
 
 
 def _thread_limits(threads: int | None):
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - threadpoolctl is in the bench extra
-        return None
+    from threadpoolctl import threadpool_limits
+
     return threadpool_limits(limits=threads)
 
 

@@ -8,14 +8,13 @@ frame over a batch of different poses of a motion clip.
 
 from __future__ import annotations
 
-import contextlib
-import os
 import platform
 import time
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from posedrift._threads import one_thread
 from posedrift._validation import check_scalar
 
 
@@ -85,19 +84,6 @@ class RenderBenchmark:
         out["render_fps"] = self.render_fps
         out["pose_and_render_fps"] = self.pose_and_render_fps
         return out
-
-
-@contextlib.contextmanager
-def _one_thread():
-    """Limit BLAS / OpenMP pools to one thread where threadpoolctl is installed."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - optional
-        env = os.environ.get("OMP_NUM_THREADS", "unset")
-        yield f"threadpoolctl not installed; OMP_NUM_THREADS={env}"
-        return
-    with threadpool_limits(limits=1):
-        yield "threadpoolctl limits=1"
 
 
 def bench_render(
@@ -170,7 +156,7 @@ def bench_render(
                 cull_backfaces=cull_backfaces,
             )
 
-    with _one_thread() as threads:
+    with one_thread() as threads:
         pixels = render_only()  # warm-up (caches, allocator)
         times_render, times_full, cpu_render, cpu_full = [], [], [], []
         for _ in range(repeats):

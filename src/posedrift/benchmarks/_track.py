@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from posedrift._build import compiled_summary
+from posedrift._threads import one_thread
 from posedrift._validation import check_scalar
 
 STAGES: tuple[str, ...] = (
@@ -186,19 +187,6 @@ def _jsonable(value):
     if isinstance(value, float) and not np.isfinite(value):
         return None
     return value
-
-
-@contextlib.contextmanager
-def one_thread() -> Iterator[str]:
-    """Limit BLAS / OpenMP pools to one thread where threadpoolctl is installed."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - optional
-        env = os.environ.get("OMP_NUM_THREADS", "unset")
-        yield f"threadpoolctl not installed; OMP_NUM_THREADS={env}"
-        return
-    with threadpool_limits(limits=1):
-        yield "one thread (threadpoolctl limits=1)"
 
 
 @contextlib.contextmanager
@@ -412,7 +400,7 @@ def simd_level() -> str:
     """The widest vector instructions NumPy found on this processor ("AVX-512", "AVX2"...).
 
     Speed depends on it more than on the clock: NumPy's float64 ``exp`` and the
-    compiled kernels' clones are vectorized for AVX-512 or AVX2 (docs/RESULTS.md).
+    compiled kernels' clones are vectorized for AVX-512 or AVX2 (docs/results-log.md).
     """
     try:
         from numpy._core._multiarray_umath import __cpu_features__ as features

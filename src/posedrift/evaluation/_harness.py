@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from posedrift._threads import blas_limited
 from posedrift._validation import check_scalar
 from posedrift.camera import DepthFrame, Intrinsics, project
 from posedrift.evaluation._metrics import (
@@ -408,7 +409,9 @@ def run_methods(
     records: list[SequenceRecord] = []
     skipped: list[tuple[str, str]] = []
     report_skip = _warn_skip if on_skip is None else on_skip
-    with _progress(progress, total) as bar:
+    # One BLAS thread for every method, as the tracker takes by default: their frames
+    # per second then compare, whatever else the machine runs.
+    with _progress(progress, total) as bar, blas_limited(1):
         task = bar.add_task("evaluating", total=total)
         for seq in sequences:
             reason = unusable_reason(seq, (r.name for r in records))

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.distance import cdist
 
+from posedrift._threads import blas_limited
 from posedrift._validation import check_rng, check_scalar
 from posedrift.camera import DepthFrame, Intrinsics, backproject, project
 from posedrift.camera._frame import MAX_PERSON_DEPTH
@@ -250,7 +251,7 @@ class PoseTracker:
         synthetic clips and between 24 and 60 on real recordings, while the
         registration's cost grows with it: the registration stage took 2.1-2.6 ms a
         frame at 24 landmarks, 4.3-4.6 at 60 and 22-28 with the exact kernel, on one
-        AVX2 core (docs/RESULTS.md, speed section).
+        AVX2 core (docs/results-log.md, speed section).
     alpha : float
         Steepness (1/m) of Algorithm 2's sigmoid.
     height : float, optional
@@ -314,7 +315,7 @@ class PoseTracker:
         and that track is kept where it is healthy and the CPD track is not, or where
         it explains the labeller's labels better by 0.03 (``_FALLBACK_MARGIN``). On
         the development clips it ran on 18% of the frames and was kept on 0.8%
-        (docs/RESULTS.md). None: CPD alone. Needs the per-point probabilities (see
+        (docs/results-log.md). None: CPD alone. Needs the per-point probabilities (see
         ``appearance_weight``); ignored with ``correspondence="icp"``.
     measure_tilt : bool
         Measure at calibration which way is up (:func:`~posedrift.tracking.world_up`:
@@ -322,6 +323,12 @@ class PoseTracker:
         level, cast the joint votes and read the facing yaw in a level camera's frame,
         and beyond 12 degrees down ask ``part_net``'s high net (beyond the paper;
         docs/RESULTS.md, "A camera mounted high"). False takes every camera for level.
+    blas_threads : int or None
+        Threads the BLAS library may use while a frame is processed (the part net's
+        matrix products). The matrices are small: on two cores, two threads made one
+        tracker alone 10% faster but two trackers side by side 2.5 times slower
+        (docs/RESULTS.md, speed section), so one thread by default keeps the speed
+        whatever else runs. None leaves the library's own setting.
     rng : int or Generator
         Seeds downsampling and RANSAC (runs are repeatable for an int).
 
@@ -373,6 +380,7 @@ class PoseTracker:
         keep_better_track: bool = True,
         icp_fallback: float | None = 0.08,
         measure_tilt: bool = True,
+        blas_threads: int | None = 1,
         rng: int | np.random.Generator | None = 0,
     ) -> None:
         caller = "PoseTracker"
@@ -459,6 +467,11 @@ class PoseTracker:
         )
         self.keep_better_track = bool(keep_better_track)
         self.measure_tilt = bool(measure_tilt)
+        if blas_threads is not None:
+            blas_threads = check_scalar(
+                blas_threads, "blas_threads", low=1, include_low=True, integer=True, caller=caller
+            )
+        self.blas_threads = blas_threads
         if icp_fallback is not None:
             icp_fallback = check_scalar(
                 icp_fallback,
@@ -547,7 +560,8 @@ class PoseTracker:
             )
         where = f"frame {frame.index}" + (f" ({frame.source})" if frame.source else "")
         try:
-            return self._process(frame, where)
+            with blas_limited(self.blas_threads):
+                return self._process(frame, where)
         except Exception as exc:
             if self._raise_errors:
                 raise
@@ -650,7 +664,7 @@ class PoseTracker:
         )
         self._measure_limbs(points, attempt.labels, graph)
         # The votes refine what is reported, not the track: fed back as the next
-        # frame's prediction, a refined arm could lock in a wrong pose (docs/RESULTS.md).
+        # frame's prediction, a refined arm could lock in a wrong pose (docs/results-log.md).
         t_votes = time.perf_counter()
         reported = self._refine_with_votes(fit.joints)
         timings["skeleton"] = timings.get("skeleton", 0.0) + 1e3 * (time.perf_counter() - t_votes)
