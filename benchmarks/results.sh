@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Reproduce the tables of docs/RESULTS.md (about an hour, one core at a time).
+# Reproduce the tables of docs/RESULTS.md (about an hour, one core at a time); OUT/summary.md
+# holds the tables that compare runs (benchmarks/results_summary.py).
 # Usage: bash benchmarks/results.sh [OUT_DIR] [PART]   (needs ../shared/data or $POSEDRIFT_DATA)
 # PART is all (the default), tables, repeats or speed: on a two-core machine run
 # "tables" and "repeats" side by side (two commands, one core each), then "speed" alone.
@@ -91,6 +92,20 @@ posedrift -q eval utd "$data/utd-mhad" --sequences "${seqs%,}" --methods "$wide"
 seqs2=$(for a in $(seq 1 27); do for s in 1 2 3 4; do printf "a%d_s%d_t2," "$a" "$s"; done; done)
 posedrift -q eval utd "$data/utd-mhad" --sequences "${seqs2%,}" --methods "$wide" \
     --json "$out/utd_trial2.json" | tee "$out/utd_trial2.md"
+# The forest's and the part net's pixel accuracy on held-out clips and bodies.
+mkdir -p "$out/labels"
+posedrift -q synth "$M/cmu/007_01.bvh" --out "$out/labels/h1" --frames 45 --height 1.58 \
+    --girth 1.15 --noise --seed 3
+posedrift -q synth "$M/cmu/007_05.bvh" --out "$out/labels/h2" --frames 45 --height 1.92 \
+    --girth 0.88
+posedrift -q synth "$M/cmu/007_10.bvh" --out "$out/labels/h3" --frames 45 --height 1.70 \
+    --girth 1.05 --noise --seed 4 --distance 3.2
+posedrift -q synth "$M/cmu-original-skeleton/131_03.bvh" --out "$out/labels/h4" --frames 90 \
+    --height 1.65 --girth 0.95 --distance 3.0 --camera-height 0.8
+for h in h1 h2 h3 h4; do
+    posedrift -q eval labels "$out/labels/$h" --json "$out/labels_${h}_forest.json"
+    posedrift -q eval labels "$out/labels/$h" --classifier net --json "$out/labels_${h}_net.json"
+done
 # Drift on the same poses at both ends: each clip's first 250 frames forward, then backward.
 posedrift -q eval synthetic builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" "$M/cmu/002_10.bvh" \
     "$M/cmu/001_08.bvh" "$M/cmu-original-skeleton/131_03.bvh" "$M/cmu/007_03.bvh" \
@@ -144,3 +159,7 @@ case "$part" in
     repeats) repeats ;;
     speed) speed ;;
 esac
+# The tables that compare runs (per clip, per view, drift, spread, the targets), from
+# every JSON in OUT so far: after "tables" and "repeats" side by side, the later one's
+# summary is the whole one.
+python "$here/benchmarks/results_summary.py" "$out" > "$out/summary.md" 2>/dev/null

@@ -17,7 +17,7 @@ def compiled_kernels() -> dict[str, bool]:
     """Whether each optional compiled kernel is importable.
 
     An installation without a C compiler still works, on the NumPy twins (the same
-    results, slower: ``docs/RESULTS.md``, speed section).
+    results, slower: ``docs/results-log.md``, speed section).
 
     Returns
     -------

@@ -295,10 +295,10 @@ class BodyPartNet:
             to the camera, which the tracker asks once its skeleton has turned away
             (:class:`FacingNets`). The turned net labels people who face the camera
             less well than the frontal one (0.83 against 0.94 of held-out pixels,
-            docs/RESULTS.md). ``"high"``: the frontal net's training with cameras
+            docs/results-log.md). ``"high"``: the frontal net's training with cameras
             0.7-2.4 m high instead of 0.7-1.3 (half of them aimed at the pelvis),
             asked in the frontal net's place where the camera looks down; on level
-            cameras it is the worse of the two (docs/RESULTS.md).
+            cameras it is the worse of the two (docs/results-log.md).
         """
         if views not in _DEFAULT_MODELS:
             raise ValueError(
@@ -359,7 +359,7 @@ class FacingNets:
 
     Beyond the paper. A net trained on frontal views labels a person seen from
     behind as their mirror image; one trained on every view also reads real people
-    who face the camera as seen from behind (docs/RESULTS.md). The tracker therefore
+    who face the camera as seen from behind (docs/results-log.md). The tracker therefore
     asks ``frontal`` while its last skeleton faces the camera, and ``turned`` once
     that skeleton has turned more than ``turn_gate`` degrees away
     (:func:`posedrift.skeleton.facing_yaw`). Where nothing tells which way the

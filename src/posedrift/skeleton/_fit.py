@@ -899,7 +899,7 @@ _BONE_END = np.array([_BONE_ROW[_BONE_ENDS.get(b, b)] for _, b in PART_JOINTS])
 # What the votes move: the upper trunk's joints directly, then each upper arm turns
 # towards its voted direction (the forearm keeps its own, the hand is carried along).
 # The legs keep the labels' skeleton: moving the hips and turning the thighs too made
-# the hip and knee angles worse (five point samples of eight clips; docs/RESULTS.md).
+# the hip and knee angles worse (five point samples of eight clips; docs/results-log.md).
 _VOTED_TRUNK = np.array([_J[n] for n in ("neck", "right_shoulder", "left_shoulder")])
 _VOTED_ARMS = tuple(
     (_J[f"{side}_shoulder"], _J[f"{side}_elbow"], _J[f"{side}_hand"]) for side in ("right", "left")
