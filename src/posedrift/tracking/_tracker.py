@@ -326,7 +326,7 @@ class PoseTracker:
     blas_threads : int or None
         Threads the BLAS library may use while a frame is processed (the part net's
         matrix products). The matrices are small: on two cores, two threads made one
-        tracker alone 10% faster but two trackers side by side 2.5 times slower
+        tracker alone 5-13% faster but two trackers side by side 2.5 times slower
         (docs/RESULTS.md, speed section), so one thread by default keeps the speed
         whatever else runs. None leaves the library's own setting.
     rng : int or Generator
