@@ -19,6 +19,8 @@ import sys
 from functools import cache
 from pathlib import Path
 
+from posedrift.skeleton import ANGLE_NAMES
+
 # (file stem, row label) of the single runs whose clips and views are tabulated.
 SINGLE_RUNS = (
     ("table1_dev", "development clips"),
@@ -47,16 +49,6 @@ REPEAT_RUNS = (
 )
 MAX_CLIP_COLUMNS = 9  # wider runs (the UTD-MHAD trials) get no per-clip table
 PAPER_MEAN = 6.26  # the paper's Table 1, degrees
-ANGLES = (
-    "left_elbow",
-    "right_elbow",
-    "left_shoulder",
-    "right_shoulder",
-    "left_knee",
-    "right_knee",
-    "left_hip",
-    "right_hip",
-)
 
 
 @cache
@@ -162,7 +154,7 @@ def targets(out: Path) -> str:
         if report is None:
             continue
         cpd = report["methods"]["cpd"]["angle_error_deg"]
-        worst = max(ANGLES, key=lambda a: cpd[a])
+        worst = max(ANGLE_NAMES, key=lambda a: cpd[a])
         met = cpd["mean"] <= PAPER_MEAN and cpd[worst] <= 8.0
         rows.append(
             [
