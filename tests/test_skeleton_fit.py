@@ -18,12 +18,14 @@ from posedrift.skeleton._fit import (
     LIMB_DIRECTION_WEIGHTS,
     N_PARTS,
     PART_RADII,
+    PELVIS_TILT_LIMIT,
     PREDICTED_SIGN_WEIGHT,
     RING_BACK_RADII,
     RING_JOINTS,
     SEGMENT_RATIOS,
     SkeletonFit,
     _anchor_shoulders,
+    _brace_pelvis,
     _place_limbs,
     bone_anchors,
     fit_skeleton,
@@ -260,6 +262,137 @@ def test_anchored_shoulders_need_the_trunk():
     out = joints.copy()
     _anchor_shoulders(out, bone_lengths=_true_bones(_posed_t_pose()), height=1.75, weight=1.0)
     np.testing.assert_array_equal(out, joints)
+
+
+def _hip_line(joints):
+    """Width (metres) and tilt from square to the trunk (degrees) of the hips' line."""
+    across = joints[J["right_hip"]] - joints[J["left_hip"]]
+    centre = 0.5 * (joints[J["right_hip"]] + joints[J["left_hip"]])
+    up = joints[J["neck"]] - centre
+    width = np.linalg.norm(across)
+    return width, np.degrees(np.arcsin(abs(across @ up) / (width * np.linalg.norm(up))))
+
+
+def test_braced_pelvis_leaves_a_t_pose_of_its_width_alone():
+    joints = _posed_t_pose()
+    out = joints.copy()
+    width = _hip_line(joints)[0]
+    _brace_pelvis(out, bone_lengths=_true_bones(joints), width=width, max_tilt=PELVIS_TILT_LIMIT)
+    np.testing.assert_allclose(out, joints, atol=1e-12)
+
+
+def _trunk_frame(joints):
+    """The trunk's up and the unit from the left hip to the right one."""
+    right, left = joints[J["right_hip"]], joints[J["left_hip"]]
+    up = joints[J["neck"]] - 0.5 * (right + left)
+    return up / np.linalg.norm(up), (right - left) / np.linalg.norm(right - left)
+
+
+def _on_thigh(joints, bones, side, target):
+    """``joints`` with the ``side`` hip moved towards ``target`` on its thigh's sphere."""
+    out = joints.copy()
+    hip, knee = J[f"{side}_hip"], J[f"{side}_knee"]
+    towards = target - out[knee]
+    out[hip] = out[knee] + bones[knee] * towards / np.linalg.norm(towards)
+    return out
+
+
+def _worst_error(joints, truth, names):
+    """The largest error in degrees of the angles ``names``."""
+    errors = np.abs(joint_angles(joints) - joint_angles(truth))
+    return max(errors[J_ANGLE[name]] for name in names)
+
+
+HIPS, KNEES = ("left_hip", "right_hip"), ("left_knee", "right_knee")
+
+
+def test_braced_pelvis_brings_a_hidden_hip_back():
+    # A hip the thigh placed 5 cm in (a leg crossing in front of it).
+    joints = _posed_t_pose()
+    bones = _true_bones(joints)
+    width = _hip_line(joints)[0]
+    rightwards = _trunk_frame(joints)[1]
+    moved = _on_thigh(joints, bones, "left", joints[J["left_hip"]] + 0.05 * rightwards)
+    out = moved.copy()
+    _brace_pelvis(out, bone_lengths=bones, width=width, max_tilt=PELVIS_TILT_LIMIT)
+    assert abs(_hip_line(moved)[0] - width) > 0.045
+    assert abs(_hip_line(out)[0] - width) < 0.001  # metres
+    # The knees and feet, measured, stay; the thighs keep their length.
+    for side in ("right", "left"):
+        hip, knee = J[f"{side}_hip"], J[f"{side}_knee"]
+        assert abs(np.linalg.norm(out[knee] - out[hip]) - bones[knee]) < 1e-12
+    others = np.setdiff1d(np.arange(15), [J["right_hip"], J["left_hip"]])
+    np.testing.assert_array_equal(out[others], moved[others])
+    # The error is shared between the sides: the worst hip angle from 9.3 to 6.0 degrees,
+    # the worst knee from 6.7 to 3.3.
+    assert _worst_error(out, joints, HIPS) < _worst_error(moved, joints, HIPS) - 3.0
+    assert _worst_error(out, joints, KNEES) < _worst_error(moved, joints, KNEES) - 3.0
+
+
+def _seated(joints, bones):
+    """``joints`` with the thighs forward and the shanks down, as on a chair."""
+    out = joints.copy()
+    up, rightwards = _trunk_frame(joints)
+    for side in ("right", "left"):
+        hip, knee, foot = (J[f"{side}_{name}"] for name in ("hip", "knee", "foot"))
+        out[knee] = out[hip] + bones[knee] * np.cross(rightwards, up)
+        out[foot] = out[knee] - bones[foot] * up
+    return out
+
+
+def test_braced_pelvis_turns_a_tilted_hip_line_back_to_the_limit():
+    # Seated: a hip the thigh placed 6 cm low tilts the line 10 degrees.
+    bones = _true_bones(_posed_t_pose())
+    joints = _seated(_posed_t_pose(), bones)
+    up = _trunk_frame(joints)[0]
+    moved = _on_thigh(joints, bones, "left", joints[J["left_hip"]] - 0.06 * up)
+    out = moved.copy()
+    _brace_pelvis(out, bone_lengths=bones, width=_hip_line(joints)[0], max_tilt=PELVIS_TILT_LIMIT)
+    assert _hip_line(moved)[1] > PELVIS_TILT_LIMIT + 3
+    assert abs(_hip_line(out)[1] - PELVIS_TILT_LIMIT) < 0.1  # degrees
+    # The worst hip angle from 7.8 to 6.2 degrees, the worst knee from 8.0 to 6.3.
+    assert _worst_error(out, joints, HIPS) < _worst_error(moved, joints, HIPS) - 1.5
+    assert _worst_error(out, joints, KNEES) < _worst_error(moved, joints, KNEES) - 1.5
+
+
+def test_braced_pelvis_keeps_a_tilt_within_the_limit():
+    # Seated, the hips 4 cm narrow and tilted 2 degrees: the width restored, the tilt kept.
+    bones = _true_bones(_posed_t_pose())
+    joints = _seated(_posed_t_pose(), bones)
+    up, rightwards = _trunk_frame(joints)
+    moved = _on_thigh(joints, bones, "left", joints[J["left_hip"]] + 0.02 * rightwards)
+    moved = _on_thigh(moved, bones, "right", joints[J["right_hip"]] - 0.02 * rightwards)
+    moved = _on_thigh(moved, bones, "left", moved[J["left_hip"]] - 0.01 * up)
+    assert 1.0 < _hip_line(moved)[1] < 3.0
+    out = moved.copy()
+    _brace_pelvis(out, bone_lengths=bones, width=_hip_line(joints)[0], max_tilt=PELVIS_TILT_LIMIT)
+    assert abs(_hip_line(out)[0] - _hip_line(joints)[0]) < 0.001
+    assert abs(_hip_line(out)[1] - _hip_line(moved)[1]) < 0.5
+
+
+def test_braced_pelvis_needs_the_trunk_and_a_width():
+    joints = _posed_t_pose()
+    joints[J["neck"]] = np.nan
+    out = joints.copy()
+    bones = _true_bones(_posed_t_pose())
+    _brace_pelvis(out, bone_lengths=bones, width=0.3, max_tilt=PELVIS_TILT_LIMIT)
+    np.testing.assert_array_equal(out, joints)
+    joints = _posed_t_pose()
+    out = joints.copy()
+    _brace_pelvis(out, bone_lengths=bones, width=np.nan, max_tilt=PELVIS_TILT_LIMIT)
+    np.testing.assert_array_equal(out, joints)
+
+
+def test_fit_skeleton_reports_the_placed_width_and_braces_to_the_given_one(rendered):
+    points, labels = _frame_points(rendered, 60)
+    graph = geodesic_graph(points)
+    bones = _true_bones(rendered.reference.joints[0])
+    kwargs = {"bone_lengths": bones, "edges": (graph.rows, graph.cols)}
+    free = fit_skeleton(points, labels, **kwargs)
+    assert abs(free.pelvis_width - _hip_line(free.joints)[0]) < 1e-12
+    braced = fit_skeleton(points, labels, pelvis_width=free.pelvis_width + 0.05, **kwargs)
+    assert abs(_hip_line(braced.joints)[0] - (free.pelvis_width + 0.05)) < 0.003
+    assert braced.pelvis_width == free.pelvis_width  # the width placed, before bracing
 
 
 def test_prior_bone_lengths_follow_the_ratios():

@@ -95,6 +95,22 @@ def test_limb_bones_keep_their_calibrated_lengths(sequence):
         np.testing.assert_allclose(lengths, calibrated[:, i], atol=1e-6)  # metres
 
 
+def test_a_braced_pelvis_keeps_the_hips_their_width_apart(sequence):
+    """The hips' width is the median of those measured; unbraced, the thighs move it."""
+    hips = [JOINT_NAMES.index("right_hip"), JOINT_NAMES.index("left_hip")]
+    widths = {}
+    for brace in (True, False):
+        tracker = PoseTracker(K, forest=LabelImages(sequence), brace_pelvis=brace)
+        joints = np.array([r.joints for r in _run(tracker, sequence.frames[:40:2])])
+        widths[brace] = np.linalg.norm(joints[:, hips[0]] - joints[:, hips[1]], axis=1)
+    assert np.ptp(widths[False]) > 0.01  # metres, as the thighs placed them
+    assert np.ptp(widths[True]) < 0.002
+    truth = sequence.reference.joints[0]
+    assert abs(np.median(widths[True]) - np.linalg.norm(truth[hips[0]] - truth[hips[1]])) < 0.02
+    tracker.reset(K)  # a new sequence, maybe another person: measured afresh
+    assert len(tracker._pelvis_widths) == 0
+
+
 @pytest.mark.parametrize("frames", [1, 5])
 def test_limb_bones_are_measured_over_the_first_frames(sequence, frames):
     """The median over ``calibration_frames`` frames, then fixed; 1 keeps the first frame's."""

@@ -18,6 +18,7 @@ _METHODS_HELP = (
     "cpd-norelabel, cpd-novotes (no joint votes), cpd-rigid, cpd-cold, cpd-reinit (a failed "
     "track always re-initialized), cpd-nofallback (CPD alone, no ICP second opinion), "
     "cpd-level (every camera taken for level: no tilt measured, no high net), "
+    "cpd-nobrace (the hips where the thighs put them, no braced pelvis), "
     "cpd-200, cpd-400, cpd-800, cpd-fullres."
 )
 

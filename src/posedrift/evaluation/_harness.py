@@ -164,6 +164,10 @@ METHODS: dict[str, tuple[str, MethodFactory]] = {
         "ablation: every camera taken for level (no tilt measured, no high net)",
         _tracker(measure_tilt=False),
     ),
+    "cpd-nobrace": (
+        "ablation: the hips where the thighs put them (no braced pelvis)",
+        _tracker(brace_pelvis=False),
+    ),
     "cpd-200": ("ablation: 200 points", _tracker(n_points=200)),
     "cpd-400": ("ablation: 400 points (the default)", _tracker(n_points=400)),
     "cpd-800": ("ablation: 800 points", _tracker(n_points=800)),

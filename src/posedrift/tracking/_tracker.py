@@ -19,6 +19,7 @@ import copy
 import math
 import time
 import warnings
+from collections import deque
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -63,6 +64,9 @@ _TRACK_FLOOR = 0.02  # floor of the tracked posterior in the fusion with appeara
 # How much better (share of points far from their part's bone, by the labeller's labels) the
 # ICP fallback's skeleton must explain the frame to replace the CPD track (``icp_fallback``).
 _FALLBACK_MARGIN = 0.03
+# Frames of measured hip widths whose median braces the pelvis (``brace_pelvis``): ten
+# seconds at 30 fps, long enough that a crossing leg's frames do not move it.
+_PELVIS_WIDTHS_KEPT = 300
 _UNSEEN_CONFIDENCE = 0.3  # a joint outside the image, as fit_skeleton's joints from the prediction
 # How far from the template's nearest point (metres) a joint follows the registration's
 # nonrigid field, and from where on the body's rigid motion alone (_carry_joints).
@@ -323,6 +327,14 @@ class PoseTracker:
         level, cast the joint votes and read the facing yaw in a level camera's frame,
         and beyond 12 degrees down ask ``part_net``'s high net (beyond the paper;
         docs/RESULTS.md, "A camera mounted high"). False takes every camera for level.
+    brace_pelvis : bool
+        Keep the pelvis rigid (beyond the paper): each frame's hips, which the thighs
+        place, are set the median of the widths measured over the last ten seconds
+        apart, their line at most 6 degrees from square to the trunk, the legs carried
+        along (``fit_skeleton``'s ``pelvis_width``). A leg crossing in front of a hip
+        otherwise pulls that hip in and down and turns its thigh (the built-in
+        motion's crossing: left hip 11 degrees off; docs/RESULTS.md, "Drift"). False
+        leaves the hips where the thighs put them.
     blas_threads : int or None
         Threads the BLAS library may use while a frame is processed (the part net's
         matrix products). The matrices are small: on two cores, two threads made one
@@ -380,6 +392,7 @@ class PoseTracker:
         keep_better_track: bool = True,
         icp_fallback: float | None = 0.08,
         measure_tilt: bool = True,
+        brace_pelvis: bool = True,
         blas_threads: int | None = 1,
         rng: int | np.random.Generator | None = 0,
     ) -> None:
@@ -467,6 +480,7 @@ class PoseTracker:
         )
         self.keep_better_track = bool(keep_better_track)
         self.measure_tilt = bool(measure_tilt)
+        self.brace_pelvis = bool(brace_pelvis)
         if blas_threads is not None:
             blas_threads = check_scalar(
                 blas_threads, "blas_threads", low=1, include_low=True, integer=True, caller=caller
@@ -525,6 +539,7 @@ class PoseTracker:
         self._calibration: Calibration | None = None
         self._limb_lengths: LimbLengths | None = None
         self._measured_calibration: Calibration | None = None
+        self._pelvis_widths: deque[float] = deque(maxlen=_PELVIS_WIDTHS_KEPT)
         self._voxel: float | None = None
         self._person_depth: float | None = None
         self._floor: tuple[np.ndarray, float] | None = None
@@ -663,6 +678,8 @@ class PoseTracker:
             registration=attempt.registration,
         )
         self._measure_limbs(points, attempt.labels, graph)
+        if math.isfinite(fit.pelvis_width):
+            self._pelvis_widths.append(fit.pelvis_width)
         # The votes refine what is reported, not the track: fed back as the next
         # frame's prediction, a refined arm could lock in a wrong pose (docs/results-log.md).
         t_votes = time.perf_counter()
@@ -706,6 +723,7 @@ class PoseTracker:
         if self._calibration is not self._measured_calibration:
             # Calibrated afresh (the only other source of a new Calibration): start over.
             self._limb_lengths = LimbLengths(self.calibration_frames)
+            self._pelvis_widths.clear()
         if not self._limb_lengths.done:
             height = self._calibration.height
             self._limb_lengths.add(points, labels, (graph.rows, graph.cols), height)
@@ -1016,6 +1034,7 @@ class PoseTracker:
             shoulder_offset=cal.shoulders,
             exits=self._image_exits(points, labels),
             facing=None if prediction is None else _facing(prediction, self._level()),
+            pelvis_width=self._pelvis_width() if anchor_shoulders else None,
             **unanchored,
         )
         in_view = self._in_view(fit.joints)
@@ -1037,6 +1056,12 @@ class PoseTracker:
             )
             fit = replace(fit, confidence=capped)
         return _Attempt(labels=labels, fit=fit, health=health)
+
+    def _pelvis_width(self) -> float | None:
+        """The hips' width to brace the pelvis to: the median of the widths measured so far."""
+        if not self.brace_pelvis or not self._pelvis_widths:
+            return None
+        return float(np.median(self._pelvis_widths))
 
     def _refine_with_votes(self, joints: np.ndarray) -> np.ndarray:
         """``joints`` moved towards this frame's joint votes (as they are without votes)."""
