@@ -111,6 +111,19 @@ def test_a_braced_pelvis_keeps_the_hips_their_width_apart(sequence):
     assert len(tracker._pelvis_widths) == 0
 
 
+def test_running_median_is_the_median_of_the_window():
+    from posedrift.tracking._tracker import _RunningMedian
+
+    window = _RunningMedian(7)
+    values = np.random.default_rng(0).normal(size=40).tolist() + [0.5] * 10  # with ties
+    for i, value in enumerate(values):
+        window.add(value)
+        assert window.median == np.median(values[max(0, i - 6) : i + 1])
+    assert len(window) == 7
+    window.clear()
+    assert len(window) == 0
+
+
 @pytest.mark.parametrize("frames", [1, 5])
 def test_limb_bones_are_measured_over_the_first_frames(sequence, frames):
     """The median over ``calibration_frames`` frames, then fixed; 1 keeps the first frame's."""

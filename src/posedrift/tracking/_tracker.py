@@ -15,6 +15,7 @@ a frontal one, and one for a person turned away that the track's own facing call
 
 from __future__ import annotations
 
+import bisect
 import copy
 import math
 import time
@@ -67,6 +68,39 @@ _FALLBACK_MARGIN = 0.03
 # Frames of measured hip widths whose median braces the pelvis (``brace_pelvis``): ten
 # seconds at 30 fps, long enough that a crossing leg's frames do not move it.
 _PELVIS_WIDTHS_KEPT = 300
+
+
+class _RunningMedian:
+    """The median of the last ``size`` values added, read in constant time.
+
+    Kept sorted beside their order of arrival: an insertion and a removal per value,
+    where ``np.median`` of the window each time read it cost several times more.
+    """
+
+    def __init__(self, size: int) -> None:
+        self._order: deque[float] = deque()
+        self._sorted: list[float] = []
+        self._size = size
+
+    def __len__(self) -> int:
+        return len(self._sorted)
+
+    def add(self, value: float) -> None:
+        self._order.append(value)
+        bisect.insort(self._sorted, value)
+        if len(self._order) > self._size:
+            del self._sorted[bisect.bisect_left(self._sorted, self._order.popleft())]
+
+    def clear(self) -> None:
+        self._order.clear()
+        self._sorted.clear()
+
+    @property
+    def median(self) -> float:
+        n, values = len(self._sorted), self._sorted
+        return values[n // 2] if n % 2 else 0.5 * (values[n // 2 - 1] + values[n // 2])
+
+
 _UNSEEN_CONFIDENCE = 0.3  # a joint outside the image, as fit_skeleton's joints from the prediction
 # How far from the template's nearest point (metres) a joint follows the registration's
 # nonrigid field, and from where on the body's rigid motion alone (_carry_joints).
@@ -539,7 +573,7 @@ class PoseTracker:
         self._calibration: Calibration | None = None
         self._limb_lengths: LimbLengths | None = None
         self._measured_calibration: Calibration | None = None
-        self._pelvis_widths: deque[float] = deque(maxlen=_PELVIS_WIDTHS_KEPT)
+        self._pelvis_widths = _RunningMedian(_PELVIS_WIDTHS_KEPT)
         self._voxel: float | None = None
         self._person_depth: float | None = None
         self._floor: tuple[np.ndarray, float] | None = None
@@ -679,7 +713,7 @@ class PoseTracker:
         )
         self._measure_limbs(points, attempt.labels, graph)
         if math.isfinite(fit.pelvis_width):
-            self._pelvis_widths.append(fit.pelvis_width)
+            self._pelvis_widths.add(fit.pelvis_width)
         # The votes refine what is reported, not the track: fed back as the next
         # frame's prediction, a refined arm could lock in a wrong pose (docs/results-log.md).
         t_votes = time.perf_counter()
@@ -1061,7 +1095,7 @@ class PoseTracker:
         """The hips' width to brace the pelvis to: the median of the widths measured so far."""
         if not self.brace_pelvis or not self._pelvis_widths:
             return None
-        return float(np.median(self._pelvis_widths))
+        return self._pelvis_widths.median
 
     def _refine_with_votes(self, joints: np.ndarray) -> np.ndarray:
         """``joints`` moved towards this frame's joint votes (as they are without votes)."""
