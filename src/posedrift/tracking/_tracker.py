@@ -364,8 +364,9 @@ class PoseTracker:
     brace_pelvis : bool
         Keep the pelvis rigid (beyond the paper): each frame's hips, which the thighs
         place, are set the median of the widths measured over the last ten seconds
-        apart, their line at most 6 degrees from square to the trunk, the legs carried
-        along (``fit_skeleton``'s ``pelvis_width``). A leg crossing in front of a hip
+        apart, their line at most 6 degrees from square to the trunk, each on its
+        thigh at the thigh's length from the measured knee (``fit_skeleton``'s
+        ``pelvis_width``). A leg crossing in front of a hip
         otherwise pulls that hip in and down and turns its thigh (the built-in
         motion's crossing: left hip 11 degrees off; docs/RESULTS.md, "Drift"). False
         leaves the hips where the thighs put them.
