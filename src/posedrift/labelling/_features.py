@@ -102,6 +102,46 @@ def checked_frame(
     return depth, valid
 
 
+class CheckedPixels:
+    """A labeller's frame and pixels checked once, with what their probes read.
+
+    The tracker asks the forest and the part net about the same pixels of the same
+    frame: one of these serves both, so the checks, the probe image (one per
+    background depth) and the pixel terms (one per reference focal length) are made
+    once a frame. ``inside`` marks the pixels in the foreground; the terms are theirs.
+    """
+
+    def __init__(
+        self,
+        depth: np.ndarray,
+        mask: np.ndarray | None,
+        pixels: np.ndarray,
+        intrinsics: Intrinsics,
+        caller: str,
+    ) -> None:
+        self.depth, self.valid = checked_frame(depth, mask, intrinsics, caller)
+        self.pixels = checked_pixels(pixels, self.depth.shape, caller)
+        self.intrinsics = intrinsics
+        at = self.pixels
+        self.inside = self.valid[at[:, 0], at[:, 1]] if len(at) else np.zeros(0, bool)
+        self._images: dict[float, np.ndarray] = {}
+        self._terms: dict[float, tuple[np.ndarray, ...]] = {}
+
+    def image(self, background: float) -> np.ndarray:
+        """:func:`probe_image` of the frame."""
+        if background not in self._images:
+            self._images[background] = probe_image(self.depth, self.valid, background)
+        return self._images[background]
+
+    def terms(self, reference_focal: float) -> tuple[np.ndarray, ...]:
+        """:func:`pixel_terms` of the pixels ``inside`` the foreground."""
+        if reference_focal not in self._terms:
+            self._terms[reference_focal] = pixel_terms(
+                self.depth, self.pixels[self.inside], self.intrinsics, reference_focal
+            )
+        return self._terms[reference_focal]
+
+
 def foreground_pixels(valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The foreground of a labeller's frame, row-major: ``(flat indices, (N, 2) pixels)``."""
     flat = np.flatnonzero(valid)
@@ -252,19 +292,35 @@ def feature_matrix(
     """
     image = probe_image(depth, mask, background)
     terms = pixel_terms(depth, pixels, intrinsics, reference_focal)
+    return probed_features(
+        image, depth.shape, terms, offsets, out=out, chunk=chunk, compiled=compiled
+    )
+
+
+def probed_features(
+    image: np.ndarray,
+    shape: tuple[int, int],
+    terms: tuple[np.ndarray, ...],
+    offsets: np.ndarray,
+    *,
+    out: np.ndarray | None = None,
+    chunk: int = 256,
+    compiled: bool = True,
+) -> np.ndarray:
+    """:func:`feature_matrix` from its :func:`probe_image` and :func:`pixel_terms`."""
     offsets = np.ascontiguousarray(offsets, dtype=np.float32)
-    n, k = len(pixels), len(offsets)
+    n, k = len(terms[0]), len(offsets)
     if out is None:
         out = np.empty((n, k), dtype=np.float32)
     if compiled and _ckernels is not None and out.flags.c_contiguous and out.dtype == np.float32:
-        _ckernels.features(offsets, image, *terms, depth.shape[0], depth.shape[1], out)
+        _ckernels.features(offsets, image, *terms, shape[0], shape[1], out)
         return out
     rows, cols, row_scale, col_scale = terms
     for start in range(0, k, chunk):
         block = offsets[start : start + chunk]
         out[:, start : start + len(block)] = pair_features(
             image,
-            depth.shape,
+            shape,
             rows[:, None],
             cols[:, None],
             row_scale[:, None],

@@ -22,8 +22,8 @@ from posedrift.camera import Intrinsics
 from posedrift.labelling._features import (
     BACKGROUND_DEPTH,
     REFERENCE_FOCAL,
+    CheckedPixels,
     checked_frame,
-    checked_pixels,
     foreground_pixels,
     pixel_terms,
     probe,
@@ -504,16 +504,21 @@ class BodyPartForest:
         >>> forest.predict_pixels(depth, np.array([[120, 160], [0, 0]]), cam).shape
         (2, 15)
         """
-        caller = "BodyPartForest.predict_pixels"
-        depth, valid = checked_frame(depth, mask, intrinsics, caller)
-        pixels = checked_pixels(pixels, depth.shape, caller)
-        out = np.full((len(pixels), self.n_parts), 1.0 / self.n_parts, dtype=np.float32)
-        leaves = np.full((self.n_trees, len(pixels)), -1, dtype=np.int32)
-        inside = valid[pixels[:, 0], pixels[:, 1]] if len(pixels) else np.zeros(0, bool)
+        checked = CheckedPixels(depth, mask, pixels, intrinsics, "BodyPartForest.predict_pixels")
+        return self.predict_checked(checked, return_leaves=return_leaves)
+
+    def predict_checked(
+        self, checked: CheckedPixels, *, return_leaves: bool = False
+    ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+        """:meth:`predict_pixels` of pixels already checked (and probed) for another model."""
+        n = len(checked.pixels)
+        out = np.full((n, self.n_parts), 1.0 / self.n_parts, dtype=np.float32)
+        leaves = np.full((self.n_trees, n), -1, dtype=np.int32)
+        inside = checked.inside
         if inside.any():
-            image = probe_image(depth, valid, self.background)
-            terms = pixel_terms(depth, pixels[inside], intrinsics, self.reference_focal)
-            reached = self._descend_frame(image, depth.shape, terms)
+            image = checked.image(self.background)
+            terms = checked.terms(self.reference_focal)
+            reached = self._descend_frame(image, checked.depth.shape, terms)
             out[inside] = self._average_leaves(reached)
             leaves[:, inside] = np.take(self.leaf, reached)
         return (out, leaves) if return_leaves else out

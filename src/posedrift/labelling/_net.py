@@ -33,10 +33,11 @@ from posedrift.camera import Intrinsics
 from posedrift.labelling._features import (
     BACKGROUND_DEPTH,
     REFERENCE_FOCAL,
+    CheckedPixels,
     checked_frame,
-    checked_pixels,
     feature_matrix,
     foreground_pixels,
+    probed_features,
 )
 from posedrift.labelling._forest import MAX_OFFSET, PartPrediction
 from posedrift.labelling._modelfile import (
@@ -214,13 +215,21 @@ class BodyPartNet:
         >>> rows.shape, bool(np.allclose(rows[1], 1 / 15))  # (0, 0) is background: uniform
         ((2, 15), True)
         """
-        caller = "BodyPartNet.predict_pixels"
-        depth, valid = checked_frame(depth, mask, intrinsics, caller)
-        pixels = checked_pixels(pixels, depth.shape, caller)
-        out = np.full((len(pixels), self.n_parts), 1.0 / self.n_parts, dtype=np.float32)
-        inside = valid[pixels[:, 0], pixels[:, 1]] if len(pixels) else np.zeros(0, bool)
+        checked = CheckedPixels(depth, mask, pixels, intrinsics, "BodyPartNet.predict_pixels")
+        return self.predict_checked(checked)
+
+    def predict_checked(self, checked: CheckedPixels) -> np.ndarray:
+        """:meth:`predict_pixels` of pixels already checked (and probed) for another model."""
+        out = np.full((len(checked.pixels), self.n_parts), 1.0 / self.n_parts, dtype=np.float32)
+        inside = checked.inside
         if inside.any():
-            out[inside] = self._probabilities(depth, valid, pixels[inside], intrinsics)
+            x = probed_features(
+                checked.image(self.background),
+                checked.depth.shape,
+                checked.terms(self.reference_focal),
+                self.offsets,
+            )
+            out[inside] = self._classify(x)
         return out
 
     def _probabilities(self, depth, valid, pixels, intrinsics) -> np.ndarray:

@@ -31,6 +31,7 @@ from posedrift._threads import blas_limited
 from posedrift._validation import check_rng, check_scalar
 from posedrift.camera import DepthFrame, Intrinsics, backproject, project
 from posedrift.camera._frame import MAX_PERSON_DEPTH
+from posedrift.labelling._features import CheckedPixels
 from posedrift.labelling._relabel import geodesic_graph, relabel
 from posedrift.points._downsample import downsample
 from posedrift.points._segment import BackgroundModel, segment_person
@@ -945,11 +946,17 @@ class PoseTracker:
             rows[off[hit]], cols[off[hit]] = r[hit], c[hit]
             off = off[~hit]
         pixels = np.column_stack([rows, cols])
+        # Checked and probed once for both models where they are posedrift's own.
+        checked = CheckedPixels(depth, mask, pixels, intr, "PoseTracker")
+
+        def predict(model, **options):
+            if hasattr(model, "predict_checked"):
+                return model.predict_checked(checked, **options)
+            return model.predict_pixels(depth, pixels, intr, mask=mask, **options)
+
         parts = votes = None
         if want_votes:
-            forest_parts, leaves = forest.predict_pixels(
-                depth, pixels, intr, mask=mask, return_leaves=True
-            )
+            forest_parts, leaves = predict(forest, return_leaves=True)
             # Each point votes from where it lies, not from the pixel it was read at. The
             # votes' offsets were learnt from level cameras: cast in a level frame.
             level = self._level()
@@ -960,9 +967,7 @@ class PoseTracker:
                 votes = (where @ level.T, *rest)
         if want_parts:
             reuse = want_votes and labeller is forest
-            parts = (
-                forest_parts if reuse else labeller.predict_pixels(depth, pixels, intr, mask=mask)
-            )
+            parts = forest_parts if reuse else predict(labeller)
         return parts, votes
 
     def _fuse(self, post: np.ndarray, appearance: np.ndarray | None) -> np.ndarray:
