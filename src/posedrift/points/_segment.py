@@ -453,15 +453,15 @@ def _largest_person(
     counts[0] = 0
     order = np.argsort(counts)[::-1]
     chosen = 0
-    z_person = None
+    z_person = person = None
     for lab in order[: min(n, 8)]:
         if counts[lab] < min_pixels:
             break
         if intrinsics is not None:
-            comp = labels == lab
-            rows = np.nonzero(comp.any(axis=1))[0]
-            cols = np.nonzero(comp.any(axis=0))[0]
-            z = z_person = float(np.median(depth[comp]))
+            person = labels == lab  # kept with its median depth if it is chosen
+            rows = np.nonzero(person.any(axis=1))[0]
+            cols = np.nonzero(person.any(axis=0))[0]
+            z = z_person = float(np.median(depth[person]))
             tall = (rows[-1] - rows[0] + 1) * z / intrinsics.fy
             wide = (cols[-1] - cols[0] + 1) * z / intrinsics.fx
             if tall < min_height or tall > max_extent or wide > max_extent:
@@ -470,7 +470,8 @@ def _largest_person(
         break
     if chosen == 0:
         return np.zeros_like(mask)
-    person = labels == chosen
+    if person is None:
+        person = labels == chosen
     # Parts split off by depth steps (an arm in front of the chest) rejoin the person
     # when they touch it in the image and lie at a similar depth.
     if z_person is None:
