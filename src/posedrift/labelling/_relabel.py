@@ -305,6 +305,15 @@ def _anchor_sources(
     return sources, gap
 
 
+def row_shares(values: np.ndarray, total: np.ndarray, eps: float) -> np.ndarray:
+    """``values (N, K)`` over their row sums ``total (N, 1)``; uniform rows where a sum
+    is at most ``eps``."""
+    full = total > eps
+    if full.all():  # the usual case: the same quotients, without the masking
+        return values / total
+    return np.where(full, values / np.where(full, total, 1.0), 1.0 / values.shape[1])
+
+
 def relabel(
     points: np.ndarray,
     labels: np.ndarray,
@@ -422,7 +431,7 @@ def relabel(
         evidence[fill] = 0.0
         evidence[np.nonzero(fill)[0], labels[fill]] = 1.0
         total = evidence.sum(axis=1, keepdims=True)
-    norm = np.where(total > 1e-6, evidence / np.where(total > 1e-6, total, 1.0), 1.0 / n_parts)
+    norm = row_shares(evidence, total, 1e-6)
     score = (norm + evidence_floor) * likelihood
     new = np.argmax(norm, axis=1)
     if not keep_plausible:

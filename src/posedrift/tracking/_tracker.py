@@ -32,7 +32,7 @@ from posedrift._validation import check_rng, check_scalar
 from posedrift.camera import DepthFrame, Intrinsics, backproject, project
 from posedrift.camera._frame import MAX_PERSON_DEPTH
 from posedrift.labelling._features import CheckedPixels
-from posedrift.labelling._relabel import geodesic_graph, relabel
+from posedrift.labelling._relabel import geodesic_graph, relabel, row_shares
 from posedrift.points._downsample import downsample
 from posedrift.points._segment import BackgroundModel, segment_person
 from posedrift.skeleton._angles import facing_yaw
@@ -974,11 +974,11 @@ class PoseTracker:
         """Product of experts of the tracked posterior and the per-pixel probabilities."""
         if appearance is None:
             return post
-        total = post.sum(axis=1, keepdims=True)
-        norm = np.where(total > 1e-12, post / np.where(total > 1e-12, total, 1.0), 1.0 / N_PARTS)
-        expert = (appearance + self.appearance_floor) ** self.appearance_weight
-        fused = (norm + _TRACK_FLOOR) * expert
-        return fused / fused.sum(axis=1, keepdims=True)
+        fused = row_shares(post, post.sum(axis=1, keepdims=True), 1e-12)
+        fused += _TRACK_FLOOR
+        fused *= (appearance + self.appearance_floor) ** self.appearance_weight
+        fused /= fused.sum(axis=1, keepdims=True)
+        return fused
 
     def _track(
         self, points: np.ndarray, graph, timings: dict[str, float], appearance=None
