@@ -568,7 +568,9 @@ class PoseTracker:
                 f"Got {type(intrinsics).__name__} instead."
             )
         self.intrinsics = intrinsics
-        self._downsample_seed = int(check_rng(self._seed).integers(2**31))
+        seed = int(check_rng(self._seed).integers(2**31))
+        self._downsample_rng = np.random.default_rng(seed)
+        self._downsample_start = self._downsample_rng.bit_generator.state
         self._last_joints: np.ndarray | None = None
         self._last_centre: np.ndarray | None = None
         self._state: _State | None = None
@@ -653,12 +655,14 @@ class PoseTracker:
                 timings_ms=timings,
             )
         full, pixels = backproject(depth, intr, mask)
-        # The same seed every frame: identical frames give identical points.
+        # The same seed every frame: identical frames give identical points. (The
+        # generator is rewound to its seeded state: seeding a new one costs more.)
+        self._downsample_rng.bit_generator.state = self._downsample_start
         points, self._voxel = downsample(
             full,
             self.n_points,
             voxel_size=self._voxel,
-            rng=self._downsample_seed,
+            rng=self._downsample_rng,
             return_voxel_size=True,
         )
         self._person_depth = float(np.median(points[:, 2]))
