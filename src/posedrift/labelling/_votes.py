@@ -221,7 +221,8 @@ def joint_modes(
         wanted = np.zeros(N_JOINTS, dtype=bool)
         wanted[np.asarray(joints, dtype=np.intp)] = True
         keep = wanted[joint]
-        where, joint, weight = where[keep], joint[keep], weight[keep]
+        if not keep.all():  # (votes cast for these joints only need no copies)
+            where, joint, weight = where[keep], joint[keep], weight[keep]
     total = np.bincount(joint, weight, minlength=N_JOINTS)
     live = total >= min_weight
     if not live.any():
