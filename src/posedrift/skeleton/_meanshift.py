@@ -76,7 +76,10 @@ def part_modes(
             f"Got shape {w.shape}."
         )
     ok = (labels >= 0) & (labels < n_parts)
-    p, lab, w = points[ok], labels[ok], w[ok]
+    if ok.all():  # the usual case: no copies
+        p, lab = points, labels
+    else:
+        p, lab, w = points[ok], labels[ok], w[ok]
     counts = np.bincount(lab, weights=w, minlength=n_parts)
     modes = np.full((n_parts, 3), np.nan)
     have = counts > 0
