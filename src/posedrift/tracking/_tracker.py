@@ -119,10 +119,13 @@ _FLOOR_RETRY = 15
 # standing the estimate of up scatters by a few degrees (UTD-MHAD: -4 to 7).
 _LEVEL_COS = math.cos(math.radians(5.0))
 _MIN_WORKING_FOCAL = 190.0  # pixels; see working_decimation
-_RING_OFFSETS = sorted(
-    ((dr, dc) for dr in range(-3, 4) for dc in range(-3, 4) if (dr, dc) != (0, 0)),
-    key=lambda o: o[0] ** 2 + o[1] ** 2,
-)  # pixel offsets, nearest first
+# Pixel offsets (rows, columns), nearest first.
+_RING_ROWS, _RING_COLS = np.array(
+    sorted(
+        ((dr, dc) for dr in range(-3, 4) for dc in range(-3, 4) if (dr, dc) != (0, 0)),
+        key=lambda o: o[0] ** 2 + o[1] ** 2,
+    )
+).T
 
 
 @dataclass
@@ -941,14 +944,13 @@ class PoseTracker:
         rows = np.clip(uv[:, 1], 0, height - 1)
         cols = np.clip(uv[:, 0], 0, width - 1)
         off = np.flatnonzero(~mask[rows, cols])
-        for dr, dc in _RING_OFFSETS:
-            if len(off) == 0:
-                break
-            r = np.clip(rows[off] + dr, 0, height - 1)
-            c = np.clip(cols[off] + dc, 0, width - 1)
+        if len(off):  # every ring offset of every such point at once; the first hit wins
+            r = np.clip(rows[off, None] + _RING_ROWS, 0, height - 1)
+            c = np.clip(cols[off, None] + _RING_COLS, 0, width - 1)
             hit = mask[r, c]
-            rows[off[hit]], cols[off[hit]] = r[hit], c[hit]
-            off = off[~hit]
+            found = np.flatnonzero(hit.any(axis=1))
+            first = hit[found].argmax(axis=1)
+            rows[off[found]], cols[off[found]] = r[found, first], c[found, first]
         pixels = np.column_stack([rows, cols])
         # Checked and probed once for both models where they are posedrift's own.
         checked = CheckedPixels(depth, mask, pixels, intr, "PoseTracker")
