@@ -6,6 +6,7 @@ scikit-learn's template.
 
 from __future__ import annotations
 
+import math
 import numbers
 from typing import Any
 
@@ -98,7 +99,7 @@ def check_scalar(
         ok = False
     elif integer and not isinstance(value, numbers.Integral):
         ok = False
-    elif not np.isfinite(value) and not (value == np.inf and high is None):
+    elif not _finite(value) and not (value == np.inf and high is None):
         ok = False
     else:
         ok = not (
@@ -115,6 +116,11 @@ def check_scalar(
             f"The '{name}' parameter{where} must be {kind} in {interval}. Got {value!r} instead."
         )
     return int(value) if integer else float(value)
+
+
+def _finite(value: numbers.Real) -> bool:
+    """``np.isfinite(value)``; a float's by ``math`` (the ufunc costs 20 times more)."""
+    return math.isfinite(value) if isinstance(value, float) else bool(np.isfinite(value))
 
 
 def check_rng(rng: int | np.random.Generator | None) -> np.random.Generator:
