@@ -267,7 +267,8 @@ def posterior_label_mass(
     kernel = getattr(_cestep, "label_mass", None) if compiled else None
     if kernel is not None and n and m and sigma2 > 0:  # (the twin covers the edge cases)
         moved = np.ascontiguousarray(moved, dtype=np.float64)
-        axis = int(np.argmax([np.ptp(moved[:, k]) for k in range(d)]))
+        spans = [moved[:, k].max() - moved[:, k].min() for k in range(d)]  # np.ptp's, cheaper
+        axis = int(np.argmax(spans))
         out = np.empty((n, n_labels))
         kernel(
             np.ascontiguousarray(target, dtype=np.float64),
