@@ -337,6 +337,11 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / n if n > 1e-12 else np.full(3, np.nan)
 
 
+def _clamp(x: float) -> float:
+    """``np.clip(x, -1, 1)`` of a scalar (NaN stays NaN), without the ufunc's overhead."""
+    return x if math.isnan(x) else min(1.0, max(-1.0, x))
+
+
 def _finite(v: np.ndarray) -> bool:
     """``np.isfinite(v).all()`` for a 3-vector, without the ufunc overhead."""
     return math.isfinite(v[0]) and math.isfinite(v[1]) and math.isfinite(v[2])
@@ -428,7 +433,7 @@ def ring_joints(
             wrist = raw.get(f"{side}_hand")
             share = 1.0  # of the shift, by how far the arm is bent (none straight)
             if wrist is not None:
-                bend = math.degrees(math.acos(np.clip(down @ _unit(wrist[0] - elbow[0]), -1, 1)))
+                bend = math.degrees(math.acos(_clamp(down @ _unit(wrist[0] - elbow[0]))))
                 share = min(1.0, bend / ELBOW_FULL_SHIFT_BEND) if math.isfinite(bend) else 1.0
             down = share * elbow_shift * scale * down
             if _finite(down):
