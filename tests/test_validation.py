@@ -58,3 +58,17 @@ def test_check_scalar_names_the_parameter_the_interval_and_the_value(value, kwar
     with pytest.raises(ValueError, match="The 'x' parameter of f must be") as info:
         check_scalar(value, "x", caller="f", **kwargs)
     info.match(message)
+
+
+def test_median_has_np_median_bits():
+    from posedrift._stats import median
+
+    rng = np.random.default_rng(0)
+    for trial in range(400):
+        n = int(rng.integers(1, 60))
+        values = rng.normal(size=n) * [1e-40, 1.0, 1e30][trial % 3]
+        if trial % 4 == 0:
+            values = np.round(values, 1)  # ties and signed zeros
+        for array in (values, values.astype(np.float32), np.column_stack([values] * 3)[:, 1]):
+            expected = float(np.median(array))
+            assert np.float64(median(array)).tobytes() == np.float64(expected).tobytes()

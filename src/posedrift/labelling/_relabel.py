@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
+from posedrift._stats import median
 from posedrift._validation import check_points, check_scalar
 
 try:  # the compiled kernels are optional: built by ``pip install -e .`` when a compiler exists
@@ -108,7 +109,7 @@ def _neighbours(points: np.ndarray, kk: int, compiled: bool) -> tuple[np.ndarray
 
 def _edge_limit(nearest: np.ndarray, max_edge_factor: float, max_edge: float | None):
     """(median of the nearest-neighbour distances ``nearest``, longest edge kept)."""
-    spacing = float(np.median(nearest))
+    spacing = median(nearest)
     limit = max_edge if max_edge is not None else max_edge_factor * max(spacing, 1e-6)
     return spacing, limit
 

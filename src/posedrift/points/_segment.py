@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from posedrift._stats import median
 from posedrift._validation import check_rng, check_scalar
 from posedrift.camera import DepthFrame, Intrinsics
 
@@ -469,7 +470,7 @@ def _largest_person(
             person = labels == lab  # kept with its median depth if it is chosen
             rows = np.nonzero(person.any(axis=1))[0]
             cols = np.nonzero(person.any(axis=0))[0]
-            z = z_person = float(np.median(depth[person]))
+            z = z_person = median(depth[person])
             tall = (rows[-1] - rows[0] + 1) * z / intrinsics.fy
             wide = (cols[-1] - cols[0] + 1) * z / intrinsics.fx
             if tall < min_height or tall > max_extent or wide > max_extent:
@@ -483,12 +484,12 @@ def _largest_person(
     # Parts split off by depth steps (an arm in front of the chest) rejoin the person
     # when they touch it in the image and lie at a similar depth.
     if z_person is None:
-        z_person = float(np.median(depth[person]))
+        z_person = median(depth[person])
     near = _dilate(person, iterations=2)
     touching = np.unique(labels[near & (labels > 0) & ~person])
     for lab in touching:
         part = labels == lab
-        if abs(float(np.median(depth[part])) - z_person) < max_join_depth:
+        if abs(median(depth[part]) - z_person) < max_join_depth:
             person |= part
     # Give back the pixels cut at depth steps that touch the person and match its depth.
     ring = _dilate(person) & mask & (labels == 0)

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.distance import cdist
 
+from posedrift._stats import median
 from posedrift._threads import blas_limited
 from posedrift._validation import check_rng, check_scalar
 from posedrift.camera import DepthFrame, Intrinsics, backproject, project
@@ -674,7 +675,7 @@ class PoseTracker:
             rng=self._downsample_rng,
             return_voxel_size=True,
         )
-        self._person_depth = float(np.median(points[:, 2]))
+        self._person_depth = median(points[:, 2])
         t2 = time.perf_counter()
         timings["points"] = 1e3 * (t2 - t1)
         graph = geodesic_graph(points)
