@@ -41,6 +41,7 @@ _EXTRA = ("pelvis", "right_hand_tip", "left_hand_tip", "right_toe", "left_toe")
 _ROW = {**_J, **{name: len(_J) + k for k, name in enumerate(_EXTRA)}}
 _SEG_START = np.array([_ROW[a] for a, _ in PART_JOINTS])
 _SEG_END = np.array([_ROW[b] for _, b in PART_JOINTS])
+_PELVIS, _RIGHT_HIP, _LEFT_HIP = _ROW["pelvis"], _J["right_hip"], _J["left_hip"]
 _TIPS = np.array([_ROW["right_hand_tip"], _ROW["left_hand_tip"]])
 _TOES = np.array([_ROW["right_toe"], _ROW["left_toe"]])
 _HANDS = np.array([_J["right_hand"], _J["left_hand"]])
@@ -57,9 +58,10 @@ def _segments(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     j = joints
     ext = np.empty((len(_ROW), 3))
     ext[: len(_J)] = j
-    ext[_ROW["pelvis"]] = 0.5 * (j[_J["right_hip"]] + j[_J["left_hip"]])
-    ext[_TIPS] = j[_HANDS] + 0.6 * (j[_HANDS] - j[_ELBOWS])
-    ext[_TOES] = j[_FEET] + 0.15 * (j[_FEET] - j[_KNEES])
+    ext[_PELVIS] = 0.5 * (j[_RIGHT_HIP] + j[_LEFT_HIP])
+    hands, feet = j[_HANDS], j[_FEET]
+    ext[_TIPS] = hands + 0.6 * (hands - j[_ELBOWS])
+    ext[_TOES] = feet + 0.15 * (feet - j[_KNEES])
     return ext[_SEG_START], ext[_SEG_END]
 
 
@@ -77,7 +79,8 @@ def bone_distances(points: np.ndarray, labels: np.ndarray, joints: np.ndarray) -
     ab = (ends - starts)[lab]  # the same differences as ends[lab] - starts[lab]
     denom = np.einsum("ij,ij->i", ab, ab)
     t = np.clip(np.einsum("ij,ij->i", points - a, ab) / np.where(denom > 0, denom, 1.0), 0, 1)
-    out[ok] = np.linalg.norm(points - (a + t[:, None] * ab), axis=1)
+    gap = points - (a + t[:, None] * ab)
+    out[ok] = np.sqrt(np.add.reduce(gap * gap, axis=1))  # np.linalg.norm's own sums
     return out
 
 
