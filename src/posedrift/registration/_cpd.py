@@ -250,7 +250,11 @@ _DEGENERATE_RTOL = 1e-9  # a set whose RMS radius is below this share of its lar
 
 
 def _rms_radius(points: np.ndarray, centre: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.sum((points - centre) ** 2, axis=1))))
+    squares = points - centre
+    squares *= squares
+    if squares.shape[1] == 3:  # coordinate by coordinate: the same sums as below, cheaper
+        return float(np.sqrt(np.mean(squares[:, 0] + squares[:, 1] + squares[:, 2])))
+    return float(np.sqrt(np.mean(np.sum(squares, axis=1))))
 
 
 def _magnitude(points: np.ndarray) -> float:
@@ -284,7 +288,7 @@ def _normalization(
     """
     d = target.shape[1]
     centre = target.mean(axis=0)
-    unit = float(np.sqrt(np.mean(np.sum((target - centre) ** 2, axis=1))))
+    unit = _rms_radius(target, centre)
     target_point = not unit > _DEGENERATE_RTOL * _magnitude(target)
     source_point = _is_single_point(source)
     if not normalize:
