@@ -443,6 +443,9 @@ def segment_person(
     return done(out)
 
 
+_FEW_COMPONENTS = 4  # components counted one by one (_largest_person)
+
+
 def _largest_person(
     mask,
     depth,
@@ -458,8 +461,11 @@ def _largest_person(
     labels, n = _components(mask, depth, max_depth_step)
     if n == 0:
         return np.zeros_like(mask)
-    counts = np.bincount(labels.ravel(), minlength=n + 1)
-    counts[0] = 0
+    if n <= _FEW_COMPONENTS:  # a pass per component beats bincount's passes over every pixel
+        counts = np.array([0] + [np.count_nonzero(labels == lab) for lab in range(1, n + 1)])
+    else:
+        counts = np.bincount(labels.ravel(), minlength=n + 1)
+        counts[0] = 0
     order = np.argsort(counts)[::-1]
     chosen = 0
     z_person = person = None
