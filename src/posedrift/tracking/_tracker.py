@@ -151,9 +151,16 @@ def _rigid_fit(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The rotation and translation that best map points ``a`` onto ``b`` (Kabsch)."""
     ca, cb = a.mean(axis=0), b.mean(axis=0)
     u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
-    s = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
+    s = np.diag([1.0, 1.0, _handedness(vt.T @ u.T)])
     rot = vt.T @ s @ u.T
     return rot, cb - rot @ ca
+
+
+def _handedness(m: np.ndarray) -> float:
+    """``np.sign(np.linalg.det(m))`` of an orthogonal 3 x 3 ``m`` (determinant +-1, so the
+    cofactor expansion has the same sign), without LAPACK's overhead."""
+    (a, b, c), (d, e, f), (g, h, i) = m.tolist()
+    return float(np.sign(a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)))
 
 
 def _icp(source: np.ndarray, target: np.ndarray, iterations: int = 10):
