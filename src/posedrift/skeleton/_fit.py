@@ -466,8 +466,12 @@ def ring_joints(
 
 
 def _units(v: np.ndarray) -> np.ndarray:
-    """:func:`_unit` of each row of ``v (K, 3)`` (the same norms, computed row by row)."""
-    norms = np.array([math.sqrt(row.dot(row)) for row in v])
+    """:func:`_unit` of each row of ``v (K, 3)`` (the same norms).
+
+    A stack of (1 x 3) @ (3 x 1) products: matmul takes each by the BLAS dot that
+    ``row.dot(row)`` calls (the same sums), without a Python loop over the rows.
+    """
+    norms = np.sqrt(np.matmul(v[:, None, :], v[:, :, None])[:, 0, 0])
     big = norms > 1e-12  # False for NaN
     out = v / np.where(big, norms, 1.0)[:, None]
     out[~big] = np.nan
