@@ -93,7 +93,18 @@ def downsample(
     """
     points = check_points(points, "points", caller="downsample", min_points=0)
     n = check_scalar(n, "n", low=1, include_low=True, integer=True, caller="downsample")
-    gen = check_rng(rng)
+    return downsample_checked(points, n, voxel_size, check_rng(rng), return_voxel_size)
+
+
+def downsample_checked(
+    points: np.ndarray,
+    n: int,
+    voxel_size: float | None,
+    gen: np.random.Generator,
+    return_voxel_size: bool,
+):
+    """:func:`downsample` of arguments already checked: C-contiguous finite ``(N, 3)``
+    float64 points (the tracker's back-projected pixels), an int and a Generator."""
     if len(points) <= n:
         out = points.copy()
         return (out, voxel_size or 0.0) if return_voxel_size else out

@@ -34,7 +34,7 @@ from posedrift.camera import DepthFrame, Intrinsics, backproject, project
 from posedrift.camera._frame import MAX_PERSON_DEPTH
 from posedrift.labelling._features import CheckedPixels
 from posedrift.labelling._relabel import geodesic_graph, relabel, row_shares
-from posedrift.points._downsample import downsample
+from posedrift.points._downsample import downsample_checked
 from posedrift.points._segment import BackgroundModel, segment_person
 from posedrift.skeleton._angles import facing_yaw
 from posedrift.skeleton._fit import (
@@ -675,12 +675,9 @@ class PoseTracker:
         # The same seed every frame: identical frames give identical points. (The
         # generator is rewound to its seeded state: seeding a new one costs more.)
         self._downsample_rng.bit_generator.state = self._downsample_start
-        points, self._voxel = downsample(
-            full,
-            self.n_points,
-            voxel_size=self._voxel,
-            rng=self._downsample_rng,
-            return_voxel_size=True,
+        # Back-projected valid depth: finite points, as downsample would check.
+        points, self._voxel = downsample_checked(
+            full, self.n_points, self._voxel, self._downsample_rng, return_voxel_size=True
         )
         self._person_depth = median(points[:, 2])
         t2 = time.perf_counter()
