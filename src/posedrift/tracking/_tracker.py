@@ -650,7 +650,7 @@ class PoseTracker:
         frame = self._working_frame(frame)
         intr = frame.intrinsics
         depth = frame.depth
-        if not np.any(depth > 0):
+        if not depth.max() > 0:  # (a DepthFrame's depth is finite and never negative)
             self._state = self._person_depth = None
             return FrameResult.empty(
                 frame.index,
