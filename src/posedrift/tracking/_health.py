@@ -121,7 +121,7 @@ def unexplained_share(
     reach = _PART_REACH * (height / 1.75)
     limit = np.where((lab >= 0) & (lab < len(reach)), reach[np.clip(lab, 0, 14)] + slack, 0.0)
     bad = ~np.isfinite(dist) | (dist > limit)
-    return np.count_nonzero(bad) / len(bad) if len(bad) else 1.0  # np.mean(bad), cheaper
+    return float(np.count_nonzero(bad) / len(bad)) if len(bad) else 1.0  # np.mean(bad), cheaper
 
 
 def assess(

@@ -659,7 +659,7 @@ class PoseTracker:
                 timestamp=frame.timestamp,
             )
         mask = self._segment(frame)
-        n_mask = np.count_nonzero(mask)
+        n_mask = int(np.count_nonzero(mask))
         t1 = time.perf_counter()
         timings["segment"] = 1e3 * (t1 - t0)
         if n_mask < self.min_points:
