@@ -510,7 +510,7 @@ class BodyPartForest:
     def predict_checked(
         self, checked: CheckedPixels, *, return_leaves: bool = False
     ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
-        """:meth:`predict_pixels` of pixels already checked (and probed) for another model."""
+        """:meth:`predict_pixels` of :class:`CheckedPixels` (checks and probes shared)."""
         n = len(checked.pixels)
         out = np.full((n, self.n_parts), 1.0 / self.n_parts, dtype=np.float32)
         leaves = np.full((self.n_trees, n), -1, dtype=np.int32)

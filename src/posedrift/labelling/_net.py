@@ -219,7 +219,7 @@ class BodyPartNet:
         return self.predict_checked(checked)
 
     def predict_checked(self, checked: CheckedPixels) -> np.ndarray:
-        """:meth:`predict_pixels` of pixels already checked (and probed) for another model."""
+        """:meth:`predict_pixels` of :class:`CheckedPixels` (checks and probes shared)."""
         out = np.full((len(checked.pixels), self.n_parts), 1.0 / self.n_parts, dtype=np.float32)
         inside = checked.inside
         if inside.any():
