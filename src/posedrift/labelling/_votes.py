@@ -231,10 +231,12 @@ def joint_modes(
     # starts from its votes' weighted mean.
     x = np.array(seeds, dtype=float)
     unseeded = live & ~np.isfinite(x).all(axis=1)
-    for c in range(3):
-        x[unseeded, c] = (
-            np.bincount(joint, weight * where[:, c], minlength=N_JOINTS)[unseeded] / total[unseeded]
-        )
+    if unseeded.any():  # (never where every joint is seeded, as the tracker seeds them)
+        for c in range(3):
+            x[unseeded, c] = (
+                np.bincount(joint, weight * where[:, c], minlength=N_JOINTS)[unseeded]
+                / total[unseeded]
+            )
     _shift_modes(
         where,
         joint,
