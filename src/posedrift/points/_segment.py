@@ -378,7 +378,7 @@ def segment_person(
     6400
     """
     if isinstance(frame, DepthFrame):
-        depth = frame.depth
+        depth = frame.depth  # float32 and finite already (DepthFrame sees to it)
         intrinsics = frame.intrinsics
     else:
         depth = np.asarray(frame, dtype=np.float32)
@@ -387,11 +387,9 @@ def segment_person(
                 f"The 'frame' argument of segment_person must be a DepthFrame or a 2-D depth "
                 f"image. Got shape {depth.shape}."
             )
-    finite = np.isfinite(depth)
-    if finite.all():
-        depth = depth.astype(np.float32, copy=False)
-    else:
-        depth = np.where(finite, depth, 0.0).astype(np.float32, copy=False)
+        finite = np.isfinite(depth)
+        if not finite.all():
+            depth = np.where(finite, depth, 0.0).astype(np.float32, copy=False)
     mask = (depth >= min_depth) & (depth <= max_depth)
     if background is not None:
         mask &= background.foreground(depth)
