@@ -10,7 +10,7 @@ import pytest
 from tests.test_forest import CAM, held_out_frames, toy_frame
 
 from posedrift.labelling import BodyPartForest, BodyPartNet, FacingNets, fit_perceptron
-from posedrift.labelling._features import feature_matrix
+from posedrift.labelling._features import CheckedPixels, feature_matrix
 from posedrift.labelling._net import FORMAT_VERSION, _forward, _gradients
 from posedrift.labelling._train import label_accuracy, train_net
 from posedrift.skeleton import PART_NAMES
@@ -111,6 +111,23 @@ def test_frame_and_pixel_predictions_agree_with_the_feature_path(toy_net):
     rows = toy_net.predict_pixels(frame.depth, pick, CAM, mask=mask)
     np.testing.assert_allclose(rows[:-1], pred.probabilities[::97], atol=1e-6)
     np.testing.assert_allclose(rows[-1], 1.0 / 15)
+
+
+def test_a_frame_checked_once_serves_the_forest_and_the_net_alike(toy_net):
+    # The tracker checks and probes a frame once for both models (CheckedPixels): each
+    # model's rows must be exactly those of its own predict_pixels.
+    frame = toy_frame(np.random.default_rng(3))
+    forest = BodyPartForest.load_default()
+    pixels = np.vstack([np.argwhere(frame.mask)[::53], [[0, 0]]])
+    checked = CheckedPixels(frame.depth, frame.mask, pixels, CAM, "test")
+    parts, leaves = forest.predict_checked(checked, return_leaves=True)
+    expected, expected_leaves = forest.predict_pixels(
+        frame.depth, pixels, CAM, mask=frame.mask, return_leaves=True
+    )
+    assert np.array_equal(parts, expected) and np.array_equal(leaves, expected_leaves)
+    rows = toy_net.predict_checked(checked)
+    assert np.array_equal(rows, toy_net.predict_pixels(frame.depth, pixels, CAM, mask=frame.mask))
+    np.testing.assert_allclose(rows[-1], 1.0 / 15)  # (0, 0) is off the person
 
 
 def test_empty_frames_and_bad_arguments(toy_net):
