@@ -304,10 +304,9 @@ def _normalization(
 
 
 def _start_sigma2(tgt_n, moved_n, warm_start, unit, floor):
-    s2 = initial_sigma2(tgt_n, moved_n)
-    if warm_start is not None:
-        s2 = warm_start.sigma2 / unit**2
-    return max(s2, floor)
+    if warm_start is not None:  # a warm start's sigma^2 replaces the closed form: none needed
+        return max(warm_start.sigma2 / unit**2, floor)
+    return max(initial_sigma2(tgt_n, moved_n), floor)
 
 
 def _finish(converged, name, iterations, tol):
