@@ -885,7 +885,8 @@ class PoseTracker:
             if prev is None or prev.kind != "nonrigid":
                 prev = self._seed_result(source)
             sigma2 = max(float(prev.sigma2), self.start_sigma**2)
-            prev = replace(prev, sigma2=sigma2)
+            if sigma2 != prev.sigma2:  # (only sigma^2 is read from it: no copy where it stays)
+                prev = replace(prev, sigma2=sigma2)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
             if self.registration == "rigid":
