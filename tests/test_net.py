@@ -120,12 +120,12 @@ def test_a_frame_checked_once_serves_the_forest_and_the_net_alike(toy_net):
     forest = BodyPartForest.load_default()
     pixels = np.vstack([np.argwhere(frame.mask)[::53], [[0, 0]]])
     checked = CheckedPixels(frame.depth, frame.mask, pixels, CAM, "test")
-    parts, leaves = forest.predict_checked(checked, return_leaves=True)
+    parts, leaves = forest._predict_checked(checked, return_leaves=True)
     expected, expected_leaves = forest.predict_pixels(
         frame.depth, pixels, CAM, mask=frame.mask, return_leaves=True
     )
     assert np.array_equal(parts, expected) and np.array_equal(leaves, expected_leaves)
-    rows = toy_net.predict_checked(checked)
+    rows = toy_net._predict_checked(checked)
     assert np.array_equal(rows, toy_net.predict_pixels(frame.depth, pixels, CAM, mask=frame.mask))
     np.testing.assert_allclose(rows[-1], 1.0 / 15)  # (0, 0) is off the person
 

@@ -505,9 +505,9 @@ class BodyPartForest:
         (2, 15)
         """
         checked = CheckedPixels(depth, mask, pixels, intrinsics, "BodyPartForest.predict_pixels")
-        return self.predict_checked(checked, return_leaves=return_leaves)
+        return self._predict_checked(checked, return_leaves=return_leaves)
 
-    def predict_checked(
+    def _predict_checked(
         self, checked: CheckedPixels, *, return_leaves: bool = False
     ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """:meth:`predict_pixels` of :class:`CheckedPixels` (checks and probes shared)."""

@@ -216,9 +216,9 @@ class BodyPartNet:
         ((2, 15), True)
         """
         checked = CheckedPixels(depth, mask, pixels, intrinsics, "BodyPartNet.predict_pixels")
-        return self.predict_checked(checked)
+        return self._predict_checked(checked)
 
-    def predict_checked(self, checked: CheckedPixels) -> np.ndarray:
+    def _predict_checked(self, checked: CheckedPixels) -> np.ndarray:
         """:meth:`predict_pixels` of :class:`CheckedPixels` (checks and probes shared)."""
         out = np.full((len(checked.pixels), self.n_parts), 1.0 / self.n_parts, dtype=np.float32)
         inside = checked.inside

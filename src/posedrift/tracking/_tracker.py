@@ -968,8 +968,8 @@ class PoseTracker:
         checked = CheckedPixels(depth, mask, pixels, intr, "PoseTracker")
 
         def predict(model, **options):
-            if hasattr(model, "predict_checked"):
-                return model.predict_checked(checked, **options)
+            if hasattr(model, "_predict_checked"):
+                return model._predict_checked(checked, **options)
             return model.predict_pixels(depth, pixels, intr, mask=mask, **options)
 
         parts = votes = None
