@@ -25,6 +25,7 @@ from posedrift.skeleton import ANGLE_NAMES
 SINGLE_RUNS = (
     ("table1_dev", "development clips"),
     ("table1_heldout", "held-out clips"),
+    ("unseen_007", "the rest of subject 007"),
     ("table1_noise", "with noise"),
     ("table1_room", "with noise, in a room"),
     ("near", "too near (1.6 m)"),
