@@ -111,6 +111,17 @@ def test_a_braced_pelvis_keeps_the_hips_their_width_apart(sequence):
     assert len(tracker._pelvis_widths) == 0
 
 
+def test_holding_unseen_joints_changes_nothing_while_the_body_is_in_view(sequence):
+    """``hold_unseen`` places only what leaves the image: in view, the same to the bit."""
+    person = np.array(sequence.reference.labels[:30]) > 0
+    assert not (person[:, [0, -1]].any() or person[:, :, [0, -1]].any())  # all in view
+    runs = {}
+    for hold in (True, False):
+        tracker = PoseTracker(K, forest=LabelImages(sequence), hold_unseen=hold)
+        runs[hold] = np.array([r.joints for r in _run(tracker, sequence.frames[:30])])
+    np.testing.assert_array_equal(runs[True], runs[False])
+
+
 def test_running_median_is_the_median_of_the_window():
     from posedrift.tracking._tracker import _RunningMedian
 

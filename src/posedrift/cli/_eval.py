@@ -19,6 +19,7 @@ _METHODS_HELP = (
     "track always re-initialized), cpd-nofallback (CPD alone, no ICP second opinion), "
     "cpd-level (every camera taken for level: no tilt measured, no high net), "
     "cpd-nobrace (the hips where the thighs put them, no braced pelvis), "
+    "cpd-nohold (joints outside the image from the prediction, no limbs held), "
     "cpd-200, cpd-400, cpd-800, cpd-fullres."
 )
 

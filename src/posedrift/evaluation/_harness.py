@@ -168,6 +168,11 @@ METHODS: dict[str, tuple[str, MethodFactory]] = {
         "ablation: the hips where the thighs put them (no braced pelvis)",
         _tracker(brace_pelvis=False),
     ),
+    "cpd-nohold": (
+        "ablation: joints outside the image from the prediction (no trunk continued, no "
+        "limbs held)",
+        _tracker(hold_unseen=False),
+    ),
     "cpd-200": ("ablation: 200 points", _tracker(n_points=200)),
     "cpd-400": ("ablation: 400 points (the default)", _tracker(n_points=400)),
     "cpd-800": ("ablation: 800 points", _tracker(n_points=800)),
