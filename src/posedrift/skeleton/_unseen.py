@@ -174,16 +174,17 @@ def hold_limbs(
         A new array; ``joints`` itself where no joint is held or the trunk's rotation
         is unknown.
     """
+    held = [
+        (j, JOINT_PARENTS[j])
+        for j in (_J[name] for name in names)
+        if not (measured[j] or (in_view[j] and previous_in_view[j] and in_view[JOINT_PARENTS[j]]))
+    ]
+    if not held:  # the usual case: no trunk frames to compute
+        return joints
     turn = trunk_frame(joints) @ trunk_frame(previous).T
     if not np.isfinite(turn).all():
         return joints
-    out = joints
-    for name in names:
-        j = _J[name]
-        parent = JOINT_PARENTS[j]
-        if measured[j] or (in_view[j] and previous_in_view[j] and in_view[parent]):
-            continue
-        if out is joints:
-            out = joints.copy()
+    out = joints.copy()
+    for j, parent in held:  # parents first: a held elbow carries its wrist
         out[j] = out[parent] + turn @ (previous[j] - previous[parent])
     return out

@@ -602,6 +602,7 @@ class PoseTracker:
         self._last_joints: np.ndarray | None = None
         self._last_centre: np.ndarray | None = None
         self._state: _State | None = None
+        self._last_in_view: tuple[Any, Any] = (None, None)  # (state's joints, their _in_view)
         self._calibration: Calibration | None = None
         self._limb_lengths: LimbLengths | None = None
         self._measured_calibration: Calibration | None = None
@@ -1107,9 +1108,11 @@ class PoseTracker:
             pelvis_width=self._pelvis_width() if anchor_shoulders else None,
             **unanchored,
         )
-        if prediction is not None and self.hold_unseen:
-            fit = self._place_unseen(fit, points, labels, exits)
         in_view = self._in_view(fit.joints)
+        if prediction is not None and self.hold_unseen:
+            placed = self._place_unseen(fit, points, labels, exits, in_view)
+            if placed is not fit:
+                fit, in_view = placed, self._in_view(placed.joints)
         health = assess(
             points,
             labels,
@@ -1129,12 +1132,14 @@ class PoseTracker:
             fit = replace(fit, confidence=capped)
         return _Attempt(labels=labels, fit=fit, health=health)
 
-    def _place_unseen(self, fit: SkeletonFit, points, labels, exits) -> SkeletonFit:
+    def _place_unseen(self, fit: SkeletonFit, points, labels, exits, in_view) -> SkeletonFit:
         """``fit`` with the trunk continued out of the image and unseen limbs held on it
-        (``hold_unseen``; :mod:`posedrift.skeleton._unseen`)."""
+        (``hold_unseen``; :mod:`posedrift.skeleton._unseen`); ``in_view``: its joints'."""
         last = None if self._state is None else self._state.joints
         if last is None or not (np.isfinite(last).all() and np.isfinite(fit.joints).all()):
             return fit
+        if self._last_in_view[0] is not last:  # once a frame, not once a fit
+            self._last_in_view = (last, self._in_view(last))
         joints = continue_trunk(
             fit.joints,
             fit.measured,
@@ -1148,8 +1153,8 @@ class PoseTracker:
             joints,
             fit.measured,
             last,
-            in_view=self._in_view(joints),
-            previous_in_view=self._in_view(last),
+            in_view=in_view if joints is fit.joints else self._in_view(joints),
+            previous_in_view=self._last_in_view[1],
         )
         return fit if joints is fit.joints else replace(fit, joints=joints)
 
