@@ -134,9 +134,12 @@ repeat near builtin "$M/cmu/007_03.bvh" "$M/cmu/007_05.bvh" "$M/cmu/002_07.bvh" 
     --distance 1.6
 repeat close "${close_clips[@]}" --frames 300 --distance 2.0
 repeat drift builtin --frames 500
-# The climber without and with the head and arms held once they leave the image.
+# The climber without and with the head and arms held once they leave the image, and at 2.0 m.
 posedrift -q eval synthetic "$M/cmu/001_08.bvh" --frames 500 --methods cpd,cpd-nohold \
     --repeats 5 --no-paper --json "$out/repeats_hold.json" | tee "$out/repeats_hold.md"
+posedrift -q eval synthetic "$M/cmu/001_08.bvh" --frames 300 --distance 2.0 \
+    --methods cpd,cpd-nohold --repeats 5 --no-paper --json "$out/repeats_hold_close.json" \
+    | tee "$out/repeats_hold_close.md"
 utd_repeat() { posedrift -q eval utd "$data/utd-mhad" --sequences "${2%,}" --methods cpd,icp \
     --repeats 5 --json "$out/repeats_$1.json" | tee "$out/repeats_$1.md"; }
 utd_repeat utd1 "$(for a in $(seq 1 27); do printf "a%d_s%d_t1," "$a" $(( a % 4 + 1 )); done)"

@@ -25,8 +25,9 @@ _UPPER_TORSO, _LOWER_TORSO = PART_INDEX["upper_torso"], PART_INDEX["lower_torso"
 
 MIN_UPPER_TORSO_POINTS = 15
 """Fewest upper-torso points for the trunk to be continued (of about 400): with less in
-view (a body at 2.0 m seen from the hips down) the torso's axis is a guess, and
-continuing it moved the whole skeleton off (docs/results-log.md)."""
+view (a body at 2.0 m seen from the hips down) the torso's axis is a guess. In one sample
+continuing it regardless moved the whole skeleton off; over five, 0-20 points were alike
+(docs/results-log.md)."""
 
 MAX_TRUNK_TURN = 35.0
 """Degrees the torso's visible axis may turn from the last frame's trunk; beyond (or for
