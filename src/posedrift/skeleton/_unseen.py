@@ -18,6 +18,7 @@ import math
 import numpy as np
 
 from posedrift.skeleton._definitions import JOINT_INDEX, JOINT_PARENTS, PART_INDEX
+from posedrift.skeleton._fit import _trunk_axes, _unit
 
 _J = JOINT_INDEX
 _NECK, _TORSO, _RIGHT_HIP, _LEFT_HIP = _J["neck"], _J["torso"], _J["right_hip"], _J["left_hip"]
@@ -46,10 +47,6 @@ _MOVED_WITH_NECK = tuple(
     for n in ("head", "right_shoulder", "left_shoulder", "right_elbow", "left_elbow")
     + ("right_hand", "left_hand")
 )
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v)
 
 
 def _pelvis(joints: np.ndarray) -> np.ndarray:
@@ -109,8 +106,7 @@ def continue_trunk(
         return joints
     torso = points[upper | (labels == _LOWER_TORSO)]
     pelvis = _pelvis(joints)
-    with np.errstate(invalid="ignore", divide="ignore"):  # NaN for a degenerate trunk
-        last_up = _unit(previous[_NECK] - _pelvis(previous))
+    last_up = _unit(previous[_NECK] - _pelvis(previous))  # NaN for a degenerate trunk
     centred = torso - torso.mean(axis=0)
     variances, axes = np.linalg.eigh(centred.T @ centred)
     axis = axes[:, 2]
@@ -134,10 +130,7 @@ def continue_trunk(
 def trunk_frame(joints: np.ndarray) -> np.ndarray:
     """``(3, 3)`` orthonormal columns: the trunk's up (pelvis centre to neck), across the
     hips (towards the right hip) and their cross product. NaN where degenerate."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        up = _unit(joints[_NECK] - _pelvis(joints))
-        across = joints[_RIGHT_HIP] - joints[_LEFT_HIP]
-        across = _unit(across - (across @ up) * up)
+    up, across = _trunk_axes(joints)
     return np.stack([up, across, np.cross(up, across)], axis=1)
 
 
@@ -153,9 +146,10 @@ def hold_limbs(
     """Unseen limb joints placed from their parents as they lay in the last frame.
 
     A joint of ``names`` that was not measured and lies outside the image (in this
-    frame or the last) or whose parent does is put at its parent plus its last offset
-    from that parent, turned by the trunk's rotation since (:func:`trunk_frame`): its
-    angles to the trunk are held. Each joint is placed after its parent.
+    frame or the last), or whose parent lies outside it in this frame, is put at its
+    parent plus its last offset from that parent, turned by the trunk's rotation since
+    (:func:`trunk_frame`): its angles to the trunk are held. Each joint is placed after
+    its parent.
 
     Parameters
     ----------
