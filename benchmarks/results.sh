@@ -2,14 +2,14 @@
 # Reproduce the tables of docs/RESULTS.md (about an hour, one core at a time); OUT/summary.md
 # holds the tables that compare runs (benchmarks/results_summary.py).
 # Usage: bash benchmarks/results.sh [OUT_DIR] [PART]   (needs ../shared/data or $POSEDRIFT_DATA)
-# PART is all (the default), tables, repeats or speed: on a two-core machine run
-# "tables" and "repeats" side by side (two commands, one core each), then "speed" alone.
+# PART is all (the default), tables, repeats, smooth or speed: on a two-core machine run
+# "tables" and "repeats" side by side (two commands, one core each), then "smooth" and "speed".
 set -euo pipefail
 here="$(cd "$(dirname "$0")/.." && pwd)"
 data="${POSEDRIFT_DATA:-$here/../shared/data}"
 out="${1:-results}"
 part="${2:-all}"
-case "$part" in all|tables|repeats|speed) ;; *) echo "unknown part: $part" >&2; exit 2;; esac
+case "$part" in all|tables|repeats|smooth|speed) ;; *) echo "unknown part: $part" >&2; exit 2;; esac
 mkdir -p "$out"
 M="$data/mocap"
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1
@@ -153,6 +153,26 @@ python "$here/benchmarks/carried_joints_figure.py" "$M/cmu/002_07.bvh" "$out/car
     --frames 300 | tee "$out/carried_joints.md"
 }
 
+smooth() {
+# Every method's joints smoothed offline (--smooth 0.1 s: a recording analysed after the
+# fact), on the development and held-out clips, the first UTD-MHAD trials, and over five
+# point samples on the development clips and the built-in motion (drift).
+posedrift -q eval synthetic builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" "$M/cmu/002_10.bvh" \
+    "$M/cmu/001_08.bvh" --frames 500 --methods "$methods" --smooth 0.1 \
+    --json "$out/smooth_dev.json" | tee "$out/smooth_dev.md"
+posedrift -q eval synthetic "$M/cmu-original-skeleton/131_03.bvh" "$M/cmu/007_03.bvh" \
+    "$M/cmu/007_05.bvh" "$M/cmu/007_08.bvh" --frames 500 --methods "$methods" --smooth 0.1 \
+    --json "$out/smooth_heldout.json" | tee "$out/smooth_heldout.md"
+first=$(for a in $(seq 1 27); do printf "a%d_s%d_t1," "$a" $(( a % 4 + 1 )); done)
+posedrift -q eval utd "$data/utd-mhad" --sequences "${first%,}" --methods "$methods" \
+    --smooth 0.1 --json "$out/smooth_utd.json" | tee "$out/smooth_utd.md"
+posedrift -q eval synthetic builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" "$M/cmu/002_10.bvh" \
+    "$M/cmu/001_08.bvh" --frames 500 --methods cpd,icp --repeats 5 --smooth 0.1 --no-paper \
+    --json "$out/smooth_repeats_dev.json" | tee "$out/smooth_repeats_dev.md"
+posedrift -q eval synthetic builtin --frames 500 --methods cpd,icp --repeats 5 --smooth 0.1 \
+    --no-paper --json "$out/smooth_repeats_drift.json" | tee "$out/smooth_repeats_drift.md"
+}
+
 speed() {
 # Speed of the tracker, per stage, one core: the person alone, in a room, and at 640 x 480.
 posedrift -q bench track --frames 300 --repeats 3 --json "$out/bench_track.json" | tee "$out/bench_track.md"
@@ -163,9 +183,10 @@ posedrift -q bench track --frames 300 --repeats 3 --room --camera d435 --distanc
 }
 
 case "$part" in
-    all) tables; repeats; speed ;;
+    all) tables; repeats; smooth; speed ;;
     tables) tables ;;
     repeats) repeats ;;
+    smooth) smooth ;;
     speed) speed ;;
 esac
 # The tables that compare runs (per clip, per view, drift, spread, the targets), from

@@ -8,7 +8,13 @@ from typing import Annotated
 import typer
 
 from posedrift.cli._app import eval_app, fail, progress_enabled
-from posedrift.cli._options import CameraTiltOption, NetOption, TurnedNetOption, load_part_net
+from posedrift.cli._options import (
+    CameraTiltOption,
+    NetOption,
+    SmoothOption,
+    TurnedNetOption,
+    load_part_net,
+)
 
 _METHODS_HELP = (
     "Comma-separated methods: cpd, shotton, pda, icp, shotton-net (Shotton's joints from "
@@ -167,6 +173,7 @@ def eval_synthetic(
         float, typer.Option("--girth", help="Body girth factor, > 0 (1 = the default body).")
     ] = 1.0,
     repeats: Annotated[int, typer.Option("--repeats", min=1, help=_REPEATS_HELP)] = 1,
+    smooth: SmoothOption = 0.0,
 ) -> None:
     """Render clips and evaluate every method on the same frames (the paper's Table 1).
 
@@ -256,6 +263,7 @@ def eval_synthetic(
             protocol="synthetic",
             on_skip=unusable,
             repeats=repeats,
+            smooth=smooth,
         )
     except ValueError as exc:
         if str(exc).startswith("No sequence"):
@@ -364,6 +372,7 @@ def eval_utd(
         ),
     ] = "kinect",
     repeats: Annotated[int, typer.Option("--repeats", min=1, help=_REPEATS_HELP)] = 1,
+    smooth: SmoothOption = 0.0,
 ) -> None:
     """Evaluate every method on UTD-MHAD against the Kinect SDK skeleton.
 
@@ -450,6 +459,7 @@ def eval_utd(
             convention=convention,
             on_skip=unusable,
             repeats=repeats,
+            smooth=smooth,
         )
     except ValueError as exc:
         if str(exc).startswith("No sequence"):

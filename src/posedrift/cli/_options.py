@@ -59,6 +59,16 @@ CameraTiltOption = Annotated[
 FpsOption = Annotated[
     float, typer.Option("--fps", min=0.001, help="Frame rate where the input has none.")
 ]
+SmoothOption = Annotated[
+    float,
+    typer.Option(
+        "--smooth",
+        min=0.0,
+        help="Smooth the joints offline over the whole recording, without lag: a local "
+        "quadratic in time with Gaussian weights of this many seconds (0.1 is a good start; "
+        "0, the default, keeps each frame's joints as tracked).",
+    ),
+]
 UnmirrorOption = Annotated[
     bool | None,
     typer.Option(

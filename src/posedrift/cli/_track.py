@@ -17,6 +17,7 @@ from posedrift.cli._options import (
     DepthScaleOption,
     FpsOption,
     IntrinsicsOption,
+    SmoothOption,
     UnmirrorOption,
     depth_scale_hint,
 )
@@ -38,6 +39,7 @@ def track(
         int, typer.Option("--points", min=20, help="Points per frame after downsampling.")
     ] = 400,
     unmirror: UnmirrorOption = None,
+    smooth: SmoothOption = 0.0,
     decimation: Annotated[
         int | None,
         typer.Option(
@@ -77,7 +79,9 @@ def track(
     Writes OUT/poses.json, poses.csv, poses.bvh, angles.png, tracking.gif and
     viewer.html. With --convention kinect, every output holds the joints moved to
     the Kinect SDK's skeleton convention (posedrift.skeleton.to_convention), for
-    comparison with Kinect-based tools. Exit status 1 when a frame could not be
+    comparison with Kinect-based tools. With --smooth S, every output holds the
+    joints smoothed offline over the whole recording (S seconds, without lag;
+    posedrift.tracking.smooth_results). Exit status 1 when a frame could not be
     read (the others are still processed and written), 2 for unusable input or
     options (an unusable --out is reported before any work), 130 after Ctrl-C
     (the outputs then hold the frames processed so far). Frames without a person
@@ -91,7 +95,7 @@ def track(
     from posedrift.cli._outputs import check_output_dir, video_stride, write_outputs
     from posedrift.io import UnreadableFrame, open_depth_source
     from posedrift.skeleton import CONVENTIONS
-    from posedrift.tracking import FrameResult, FrameStatus, PoseTracker
+    from posedrift.tracking import FrameResult, FrameStatus, PoseTracker, smooth_results
 
     if point_clouds not in (None, "npz", "ply"):
         raise fail(f"--point-clouds must be 'npz' or 'ply'. Got {point_clouds!r}.")
@@ -152,6 +156,7 @@ def track(
         interrupted = True
     finally:  # whatever was processed is written, even after an interruption
         if results:
+            results = smooth_results(results, smooth, fps=reader.fps)
             results = _in_convention(results, convention)
             written = write_outputs(
                 results,

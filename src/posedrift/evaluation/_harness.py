@@ -32,7 +32,7 @@ from posedrift.evaluation._metrics import (
 )
 from posedrift.evaluation._types import EvaluationSequence, Reference
 from posedrift.skeleton import CONVENTIONS, facing_yaw, joint_angles, to_convention
-from posedrift.tracking import FrameResult, FrameStatus, PoseMethod
+from posedrift.tracking import FrameResult, FrameStatus, PoseMethod, smooth_results
 
 logger = logging.getLogger(__name__)
 
@@ -360,6 +360,7 @@ def run_methods(
     keep_frames: bool = False,
     on_skip: Callable[[str, str], None] | None = None,
     seed: int = 0,
+    smooth: float = 0.0,
 ) -> EvaluationRun:
     """Run every method over every sequence, the same frames for all.
 
@@ -396,6 +397,10 @@ def run_methods(
     seed : int
         Seed of the random point sampling of the methods that have one (the
         trackers: factories marked ``seeded``); the others run as they are.
+    smooth : float
+        Seconds: every method's joints smoothed offline over each whole sequence
+        (:func:`posedrift.tracking.smooth_results`) before they are scored; 0 scores
+        them as the methods gave them, frame by frame.
 
     Returns
     -------
@@ -469,6 +474,7 @@ def run_methods(
                     bar.advance(task)
                 if observer is not None:
                     observer.__exit__(None, None, None)
+                run.results = smooth_results(run.results, smooth, fps=seq.fps)
                 runs[(name, seq.name)] = run
             records.append(
                 SequenceRecord(
@@ -782,6 +788,7 @@ def evaluate(
     convention: str = "native",
     on_skip: Callable[[str, str], None] | None = None,
     repeats: int = 1,
+    smooth: float = 0.0,
 ) -> dict:
     """Evaluate methods on sequences: the JSON of ``posedrift eval`` (``METHOD.md`` section 6).
 
@@ -814,6 +821,9 @@ def evaluate(
         comparisons need that spread. Their numbers are then the means over the runs,
         with a ``"repeats"`` block (see :func:`mean_of_repeats`), and the report says
         ``"repeats": n``; the other methods and the figures come from the first run.
+    smooth : float
+        Seconds: score every method's joints smoothed offline, without lag (see
+        :func:`run_methods`); the report then says ``"smoothing_s": smooth``.
 
     Returns
     -------
@@ -840,8 +850,11 @@ def evaluate(
         protocol=protocol,
         keep_frames=figures_dir is not None,
         on_skip=on_skip,
+        smooth=smooth,
     )
     report = summarize(run, convention=convention)
+    if smooth:
+        report["smoothing_s"] = smooth
     seeded = {name: f for name, f in _factories(methods).items() if _is_seeded(f)}
     if repeats > 1 and seeded:
         rows = {name: [report["methods"][name]] for name in seeded}
@@ -855,6 +868,7 @@ def evaluate(
                 protocol=run.protocol,
                 on_skip=lambda name, reason: None,  # reported by the first run
                 seed=seed,
+                smooth=smooth,
             )
             for name, row in summarize(again, convention=convention)["methods"].items():
                 rows[name].append(row)

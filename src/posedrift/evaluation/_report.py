@@ -151,6 +151,11 @@ def markdown_table(report: Mapping, *, paper: bool = True) -> str:
             f"\nJoints scored in the {convention} convention (fixed per-joint offsets, "
             f"posedrift.skeleton.to_convention). Unconverted MPJPE / mAP@10cm: {native}.\n"
         )
+    if report.get("smoothing_s"):
+        text += (
+            f"\nEvery method's joints smoothed offline over each whole sequence before scoring "
+            f"(--smooth {report['smoothing_s']:g} s, posedrift.tracking.smooth_results).\n"
+        )
     text += _in_view_note(report)
     if paper:
         text += (

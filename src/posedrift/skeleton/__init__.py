@@ -25,6 +25,7 @@ from posedrift.skeleton._definitions import (
     PART_NAMES,
     SEGMENT_RATIOS,
 )
+from posedrift.skeleton._smooth import smooth_joints
 from posedrift.skeleton._tpose import t_pose_joints
 
 __all__ = [
@@ -46,6 +47,7 @@ __all__ = [
     "fit_convention",
     "joint_angles",
     "pelvis_centre",
+    "smooth_joints",
     "t_pose_joints",
     "to_convention",
 ]
