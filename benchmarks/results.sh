@@ -154,9 +154,10 @@ python "$here/benchmarks/carried_joints_figure.py" "$M/cmu/002_07.bvh" "$out/car
 }
 
 smooth() {
-# Every method's joints smoothed offline (--smooth 0.1 s: a recording analysed after the
+# Every method's joints smoothed in time (--smooth 0.1 s: a recording analysed after the
 # fact), on the development and held-out clips, the first UTD-MHAD trials, and over five
-# point samples on the development clips and the built-in motion (drift).
+# point samples on the development clips and the built-in motion (drift); then with two
+# frames' latency (--smooth-lag 0.067: a live stream).
 posedrift -q eval synthetic builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" "$M/cmu/002_10.bvh" \
     "$M/cmu/001_08.bvh" --frames 500 --methods "$methods" --smooth 0.1 \
     --json "$out/smooth_dev.json" | tee "$out/smooth_dev.md"
@@ -171,6 +172,16 @@ posedrift -q eval synthetic builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" "$M/
     --json "$out/smooth_repeats_dev.json" | tee "$out/smooth_repeats_dev.md"
 posedrift -q eval synthetic builtin --frames 500 --methods cpd,icp --repeats 5 --smooth 0.1 \
     --no-paper --json "$out/smooth_repeats_drift.json" | tee "$out/smooth_repeats_drift.md"
+# The same smoothing with two frames' latency (a live stream, posedrift.tracking.LiveSmoother).
+posedrift -q eval synthetic builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" "$M/cmu/002_10.bvh" \
+    "$M/cmu/001_08.bvh" --frames 500 --methods "$methods" --smooth 0.1 --smooth-lag 0.067 \
+    --json "$out/live_dev.json" | tee "$out/live_dev.md"
+posedrift -q eval utd "$data/utd-mhad" --sequences "${first%,}" --methods "$methods" \
+    --smooth 0.1 --smooth-lag 0.067 --json "$out/live_utd.json" | tee "$out/live_utd.md"
+posedrift -q eval synthetic builtin "$M/cmu/002_05.bvh" "$M/cmu/002_07.bvh" "$M/cmu/002_10.bvh" \
+    "$M/cmu/001_08.bvh" --frames 500 --methods cpd,icp --repeats 5 --smooth 0.1 \
+    --smooth-lag 0.067 --no-paper --json "$out/live_repeats_dev.json" \
+    | tee "$out/live_repeats_dev.md"
 }
 
 speed() {

@@ -38,6 +38,8 @@ SINGLE_RUNS = (
     ("smooth_dev", "development clips, smoothed offline (--smooth 0.1)"),
     ("smooth_heldout", "held-out clips, smoothed offline"),
     ("smooth_utd", "UTD-MHAD, 27 first trials, smoothed offline"),
+    ("live_dev", "development clips, smoothed with two frames' latency (--smooth-lag 0.067)"),
+    ("live_utd", "UTD-MHAD, 27 first trials, smoothed with two frames' latency"),
 )
 REPEAT_RUNS = (
     ("repeats_dev", "development clips"),
@@ -52,6 +54,7 @@ REPEAT_RUNS = (
     ("repeats_utd2", "UTD-MHAD, 108 second trials"),
     ("smooth_repeats_dev", "development clips, smoothed offline"),
     ("smooth_repeats_drift", "built-in motion, smoothed offline"),
+    ("live_repeats_dev", "development clips, smoothed with two frames' latency"),
 )
 MAX_CLIP_COLUMNS = 9  # wider runs (the UTD-MHAD trials) get no per-clip table
 PAPER_MEAN = 6.26  # the paper's Table 1, degrees
@@ -160,6 +163,7 @@ def targets(out: Path) -> str:
         ("table1_heldout", "held out"),
         ("smooth_dev", "development clips, smoothed offline"),
         ("smooth_heldout", "held out, smoothed offline"),
+        ("live_dev", "development clips, smoothed with two frames' latency"),
     ):
         report = load(out, stem)
         if report is None:

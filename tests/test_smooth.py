@@ -19,7 +19,7 @@ from posedrift.evaluation import (
     run_methods,
 )
 from posedrift.skeleton import joint_angles, smooth_joints, t_pose_joints
-from posedrift.tracking import FrameResult, FrameStatus, smooth_results
+from posedrift.tracking import FrameResult, FrameStatus, LiveSmoother, smooth_results
 
 FPS = 30.0
 
@@ -176,7 +176,10 @@ def test_run_methods_smooths_every_method_before_scoring():
     # The report says so, in the JSON and under the table.
     report = evaluate([seq], {"jitter": _Jitter}, smooth=0.1, **kw)
     assert report["smoothing_s"] == 0.1
-    assert "smoothed offline" in markdown_table(report, paper=False)
+    assert "smoothed in time before scoring (--smooth 0.1 s;" in markdown_table(report, paper=False)
+    lagged = evaluate([seq], {"jitter": _Jitter}, smooth=0.1, smooth_lag=0.05, **kw)
+    assert lagged["smoothing_lag_s"] == 0.05
+    assert "frames at most 0.05 s after each" in markdown_table(lagged, paper=False)
     assert "smoothing_s" not in evaluate([seq], {"jitter": _Jitter}, **kw)
 
 
@@ -202,3 +205,46 @@ def test_track_smooth_option_writes_smoothed_joints(tmp_path):
     want = smooth_joints(outs["raw"], np.arange(10) / 30.0, 0.1)
     np.testing.assert_allclose(outs["smooth"], want, atol=1e-9)
     assert not np.allclose(outs["smooth"], outs["raw"])
+
+
+def test_lag_limits_the_frames_after_each_one():
+    _, noisy, t = _swing(noise=0.01)
+    full = smooth_joints(noisy, t, 0.1)
+    np.testing.assert_array_equal(smooth_joints(noisy, t, 0.1, lag=0.3), full)  # 3 sigma
+    # With lag 0 only the past counts: changing the future changes nothing before it.
+    past = smooth_joints(noisy, t, 0.1, lag=0.0)
+    changed = noisy.copy()
+    changed[50:] += 0.5
+    np.testing.assert_array_equal(smooth_joints(changed, t, 0.1, lag=0.0)[:50], past[:50])
+    # With two frames' lag, frame k depends on frames up to k + 2 only.
+    two = smooth_joints(changed, t, 0.1, lag=2 / FPS)
+    np.testing.assert_array_equal(two[:48], smooth_joints(noisy, t, 0.1, lag=2 / FPS)[:48])
+    assert not np.array_equal(two[48], smooth_joints(noisy, t, 0.1, lag=2 / FPS)[48])
+    with pytest.raises(ValueError, match="'lag' must be a non-negative"):
+        smooth_joints(noisy, t, 0.1, lag=-1.0)
+
+
+@pytest.mark.parametrize("timestamps", [True, False])
+def test_live_smoother_gives_the_recordings_results_with_its_latency(timestamps):
+    results = _results(timestamps=timestamps)
+    batch = smooth_results(results, 0.1, lag=2 / FPS)
+    smoother = LiveSmoother(sigma=0.1, lag=2 / FPS)
+    given = []
+    for k, result in enumerate(results):
+        given += smoother.push(result)
+        assert [r.index for r in given] == list(range(max(0, k - 1)))  # two frames late
+    given += smoother.flush()
+    assert len(given) == len(results)
+    for live, whole in zip(given, batch, strict=True):
+        assert (live.index, live.status) == (whole.index, whole.status)
+        np.testing.assert_allclose(live.joints, whole.joints, atol=1e-12)
+    # Out of time order: a clear error.
+    smoother.push(results[5])
+    with pytest.raises(ValueError, match="frame 4 is at .* before the last frame"):
+        smoother.push(results[4])
+
+
+def test_smooth_lag_needs_smooth():
+    result = CliRunner().invoke(app, ["track", "x", "--out", "o", "--smooth-lag", "0.1"])
+    assert result.exit_code == 2
+    assert "--smooth-lag needs --smooth" in result.output

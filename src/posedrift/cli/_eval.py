@@ -11,8 +11,10 @@ from posedrift.cli._app import eval_app, fail, progress_enabled
 from posedrift.cli._options import (
     CameraTiltOption,
     NetOption,
+    SmoothLagOption,
     SmoothOption,
     TurnedNetOption,
+    check_smoothing,
     load_part_net,
 )
 
@@ -174,6 +176,7 @@ def eval_synthetic(
     ] = 1.0,
     repeats: Annotated[int, typer.Option("--repeats", min=1, help=_REPEATS_HELP)] = 1,
     smooth: SmoothOption = 0.0,
+    smooth_lag: SmoothLagOption = None,
 ) -> None:
     """Render clips and evaluate every method on the same frames (the paper's Table 1).
 
@@ -205,6 +208,7 @@ def eval_synthetic(
     _check_range("--camera-height", camera_height, 0.0, None)
     _check_range("--camera-tilt", camera_tilt, -90.0, 90.0)
     _check_outputs(json_out, figures)
+    check_smoothing(smooth, smooth_lag)
     placement = {} if distance is None else {"distance": distance}
     if camera_height is not None:
         placement["camera_height"] = camera_height
@@ -264,6 +268,7 @@ def eval_synthetic(
             on_skip=unusable,
             repeats=repeats,
             smooth=smooth,
+            smooth_lag=smooth_lag,
         )
     except ValueError as exc:
         if str(exc).startswith("No sequence"):
@@ -373,6 +378,7 @@ def eval_utd(
     ] = "kinect",
     repeats: Annotated[int, typer.Option("--repeats", min=1, help=_REPEATS_HELP)] = 1,
     smooth: SmoothOption = 0.0,
+    smooth_lag: SmoothLagOption = None,
 ) -> None:
     """Evaluate every method on UTD-MHAD against the Kinect SDK skeleton.
 
@@ -411,6 +417,7 @@ def eval_utd(
     except ValueError as exc:
         raise fail(str(exc)) from exc
     _check_outputs(json_out, figures)
+    check_smoothing(smooth, smooth_lag)
     wanted = None
     if sequences is not None:
         wanted = [s.strip() for s in sequences.split(",") if s.strip()]
@@ -460,6 +467,7 @@ def eval_utd(
             on_skip=unusable,
             repeats=repeats,
             smooth=smooth,
+            smooth_lag=smooth_lag,
         )
     except ValueError as exc:
         if str(exc).startswith("No sequence"):

@@ -69,6 +69,24 @@ SmoothOption = Annotated[
         "0, the default, keeps each frame's joints as tracked).",
     ),
 ]
+SmoothLagOption = Annotated[
+    float | None,
+    typer.Option(
+        "--smooth-lag",
+        min=0.0,
+        help="With --smooth: use only the frames up to this many seconds after each one "
+        "(what a live stream smoothed with that latency gets, posedrift.tracking.LiveSmoother; "
+        "default: the whole window).",
+    ),
+]
+
+
+def check_smoothing(smooth: float, smooth_lag: float | None) -> None:
+    """Fail (exit 2) for --smooth-lag without --smooth."""
+    if smooth_lag is not None and not smooth:
+        raise fail("--smooth-lag needs --smooth (the smoothing's width, seconds).")
+
+
 UnmirrorOption = Annotated[
     bool | None,
     typer.Option(

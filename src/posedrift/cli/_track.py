@@ -17,8 +17,10 @@ from posedrift.cli._options import (
     DepthScaleOption,
     FpsOption,
     IntrinsicsOption,
+    SmoothLagOption,
     SmoothOption,
     UnmirrorOption,
+    check_smoothing,
     depth_scale_hint,
 )
 
@@ -40,6 +42,7 @@ def track(
     ] = 400,
     unmirror: UnmirrorOption = None,
     smooth: SmoothOption = 0.0,
+    smooth_lag: SmoothLagOption = None,
     decimation: Annotated[
         int | None,
         typer.Option(
@@ -105,6 +108,7 @@ def track(
         )
     if height is not None and not 0.5 <= height <= 2.6:
         raise fail(f"--height must be in [0.5, 2.6] metres. Got {height:g}.")
+    check_smoothing(smooth, smooth_lag)
     check_output_dir(out, "--out")
     if point_clouds:
         check_output_dir(out / "points", "--point-clouds")
@@ -156,7 +160,7 @@ def track(
         interrupted = True
     finally:  # whatever was processed is written, even after an interruption
         if results:
-            results = smooth_results(results, smooth, fps=reader.fps)
+            results = smooth_results(results, smooth, lag=smooth_lag, fps=reader.fps)
             results = _in_convention(results, convention)
             written = write_outputs(
                 results,

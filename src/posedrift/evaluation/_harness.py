@@ -361,6 +361,7 @@ def run_methods(
     on_skip: Callable[[str, str], None] | None = None,
     seed: int = 0,
     smooth: float = 0.0,
+    smooth_lag: float | None = None,
 ) -> EvaluationRun:
     """Run every method over every sequence, the same frames for all.
 
@@ -401,6 +402,10 @@ def run_methods(
         Seconds: every method's joints smoothed offline over each whole sequence
         (:func:`posedrift.tracking.smooth_results`) before they are scored; 0 scores
         them as the methods gave them, frame by frame.
+    smooth_lag : float, optional
+        Seconds: smooth each frame with the frames at most this long after it (the
+        latency of :class:`posedrift.tracking.LiveSmoother` on a live stream); None
+        uses the whole window.
 
     Returns
     -------
@@ -474,7 +479,7 @@ def run_methods(
                     bar.advance(task)
                 if observer is not None:
                     observer.__exit__(None, None, None)
-                run.results = smooth_results(run.results, smooth, fps=seq.fps)
+                run.results = smooth_results(run.results, smooth, lag=smooth_lag, fps=seq.fps)
                 runs[(name, seq.name)] = run
             records.append(
                 SequenceRecord(
@@ -789,6 +794,7 @@ def evaluate(
     on_skip: Callable[[str, str], None] | None = None,
     repeats: int = 1,
     smooth: float = 0.0,
+    smooth_lag: float | None = None,
 ) -> dict:
     """Evaluate methods on sequences: the JSON of ``posedrift eval`` (``METHOD.md`` section 6).
 
@@ -824,6 +830,9 @@ def evaluate(
     smooth : float
         Seconds: score every method's joints smoothed offline, without lag (see
         :func:`run_methods`); the report then says ``"smoothing_s": smooth``.
+    smooth_lag : float, optional
+        With ``smooth``: the latest frame used after each one, seconds (see
+        :func:`run_methods`); the report then says ``"smoothing_lag_s"``.
 
     Returns
     -------
@@ -851,10 +860,13 @@ def evaluate(
         keep_frames=figures_dir is not None,
         on_skip=on_skip,
         smooth=smooth,
+        smooth_lag=smooth_lag,
     )
     report = summarize(run, convention=convention)
     if smooth:
         report["smoothing_s"] = smooth
+        if smooth_lag is not None:
+            report["smoothing_lag_s"] = smooth_lag
     seeded = {name: f for name, f in _factories(methods).items() if _is_seeded(f)}
     if repeats > 1 and seeded:
         rows = {name: [report["methods"][name]] for name in seeded}
@@ -869,6 +881,7 @@ def evaluate(
                 on_skip=lambda name, reason: None,  # reported by the first run
                 seed=seed,
                 smooth=smooth,
+                smooth_lag=smooth_lag,
             )
             for name, row in summarize(again, convention=convention)["methods"].items():
                 rows[name].append(row)

@@ -152,9 +152,11 @@ def markdown_table(report: Mapping, *, paper: bool = True) -> str:
             f"posedrift.skeleton.to_convention). Unconverted MPJPE / mAP@10cm: {native}.\n"
         )
     if report.get("smoothing_s"):
+        lag = report.get("smoothing_lag_s")
+        window = "" if lag is None else f", using frames at most {lag:g} s after each"
         text += (
-            f"\nEvery method's joints smoothed offline over each whole sequence before scoring "
-            f"(--smooth {report['smoothing_s']:g} s, posedrift.tracking.smooth_results).\n"
+            f"\nEvery method's joints smoothed in time before scoring (--smooth "
+            f"{report['smoothing_s']:g} s{window}; posedrift.tracking.smooth_results).\n"
         )
     text += _in_view_note(report)
     if paper:

@@ -23,19 +23,24 @@ _RIDGE = 1e-6
 frame has too few neighbours to fit a quadratic, the fit falls back towards a line or
 the frame itself instead of failing."""
 
+_TIME_TOLERANCE = 1e-6
+"""Seconds by which two frames' times may differ from the window's edge and still count."""
+
 _CHUNK = 4096
 """Frames smoothed at once (bounds the memory of long recordings)."""
 
 
-def smooth_joints(joints, times, sigma: float) -> np.ndarray:
+def smooth_joints(joints, times, sigma: float, *, lag: float | None = None) -> np.ndarray:
     """Joint paths smoothed in time, without lag (local quadratic fits).
 
     Each finite joint position is replaced by the value at its frame's time of a
     quadratic fitted by weighted least squares to the same joint over the frames
     within ``3 * sigma`` seconds, with Gaussian weights of standard deviation
-    ``sigma``. Frames where a joint is unknown (NaN) stay unknown and split its path:
-    nothing is smoothed across a frame without the joint (a person who left the view,
-    a lost frame).
+    ``sigma``; with ``lag``, only over the frames up to ``lag`` seconds after it,
+    so that a live stream can be smoothed with that latency
+    (:class:`posedrift.tracking.LiveSmoother`). Frames where a joint is unknown (NaN)
+    stay unknown and split its path: nothing is smoothed across a frame without the
+    joint (a person who left the view, a lost frame).
 
     Parameters
     ----------
@@ -48,6 +53,9 @@ def smooth_joints(joints, times, sigma: float) -> np.ndarray:
         Standard deviation of the weights, seconds; 0 returns the joints unchanged.
         0.1 s (three frames at 30 per second) is the value measured in
         ``docs/RESULTS.md``.
+    lag : float, optional
+        Seconds: the latest frame used is this long after the one smoothed (None:
+        ``3 * sigma``, every frame of the window; 0: the past only).
 
     Returns
     -------
@@ -58,7 +66,7 @@ def smooth_joints(joints, times, sigma: float) -> np.ndarray:
     ------
     ValueError
         If the shapes do not match, ``times`` is not finite and non-decreasing, or
-        ``sigma`` is negative or not finite.
+        ``sigma`` or ``lag`` is negative or not finite.
 
     Examples
     --------
@@ -81,13 +89,17 @@ def smooth_joints(joints, times, sigma: float) -> np.ndarray:
         raise ValueError("'times' must be finite and non-decreasing (seconds).")
     if not (np.isfinite(sigma) and sigma >= 0):
         raise ValueError(f"'sigma' must be a non-negative number of seconds. Got {sigma}.")
+    if lag is not None and not (np.isfinite(lag) and lag >= 0):
+        raise ValueError(f"'lag' must be a non-negative number of seconds. Got {lag}.")
     if sigma == 0 or len(joints) < 2:
         return joints
     known = np.isfinite(joints).all(axis=2)  # (T, J)
     # Frames of one stretch of a joint's path share an id: the unknown frames before them.
     stretch = np.cumsum(~known, axis=0)
     lo = np.searchsorted(times, times - _REACH * sigma, side="left")
-    hi = np.searchsorted(times, times + _REACH * sigma, side="right")
+    ahead = _REACH * sigma if lag is None else min(lag, _REACH * sigma)
+    # (The tolerance keeps a frame exactly ``lag`` later despite rounding: 2 / 30 s.)
+    hi = np.searchsorted(times, times + ahead + _TIME_TOLERANCE, side="right")
     width = int((hi - lo).max())
     out = joints.copy()
     for start in range(0, len(joints), _CHUNK):

@@ -3,15 +3,15 @@
 from __future__ import annotations
 
 import enum
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Protocol
 
 import numpy as np
 
 from posedrift.camera import DepthFrame, Intrinsics
-from posedrift.skeleton import JOINT_NAMES, angles_dict, joint_angles, smooth_joints
+from posedrift.skeleton import JOINT_NAMES, angles_dict, joint_angles
 
 
 class FrameStatus(enum.StrEnum):
@@ -131,50 +131,6 @@ class FrameResult:
         if self.message:
             out["message"] = self.message
         return out
-
-
-def smooth_results(
-    results: Sequence[FrameResult], sigma: float, *, fps: float = 30.0
-) -> list[FrameResult]:
-    """A recording's results with their joints smoothed offline, without lag.
-
-    :func:`posedrift.skeleton.smooth_joints` over the whole sequence: each joint's
-    path is fitted, around each frame, by a quadratic in time over the frames within
-    ``3 * sigma`` seconds, before and after. For results already recorded (``posedrift
-    track --smooth``), not for a live stream: a frame's smoothed joints depend on the
-    frames after it. Frames without a pose stay so and split the paths. Everything
-    but the joints (and the angles, computed from them) is kept.
-
-    Parameters
-    ----------
-    results : sequence of FrameResult
-        One sequence's results, in order.
-    sigma : float
-        Seconds; 0 returns the results as they are.
-    fps : float
-        Frame rate for the frames' times where the results lack timestamps (or their
-        timestamps decrease somewhere): frame ``index / fps``.
-
-    Returns
-    -------
-    list of FrameResult
-    """
-    results = list(results)
-    if not (np.isfinite(sigma) and sigma >= 0):
-        raise ValueError(f"'sigma' must be a non-negative number of seconds. Got {sigma}.")
-    if sigma == 0 or not results:
-        return results
-    stamps = [r.timestamp for r in results]
-    times = np.array([np.nan if s is None else s for s in stamps], dtype=float)
-    if not (np.isfinite(times).all() and np.all(np.diff(times) >= 0)):
-        if not fps > 0:
-            raise ValueError(f"'fps' must be positive. Got {fps}.")
-        times = np.array([r.index for r in results], dtype=float) / fps
-    joints = smooth_joints(np.stack([r.joints for r in results]), times, sigma)
-    return [
-        replace(r, joints=j) if np.isfinite(r.joints).any() else r
-        for r, j in zip(results, joints, strict=True)
-    ]
 
 
 class PoseMethod(Protocol):
