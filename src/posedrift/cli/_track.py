@@ -83,8 +83,9 @@ def track(
     viewer.html. With --convention kinect, every output holds the joints moved to
     the Kinect SDK's skeleton convention (posedrift.skeleton.to_convention), for
     comparison with Kinect-based tools. With --smooth S, every output holds the
-    joints smoothed offline over the whole recording (S seconds, without lag;
-    posedrift.tracking.smooth_results). Exit status 1 when a frame could not be
+    joints smoothed over the whole recording (S seconds, without lag;
+    posedrift.tracking.smooth_results), with --smooth-lag L as a live stream with L
+    seconds of latency would have them. Exit status 1 when a frame could not be
     read (the others are still processed and written), 2 for unusable input or
     options (an unusable --out is reported before any work), 130 after Ctrl-C
     (the outputs then hold the frames processed so far). Frames without a person

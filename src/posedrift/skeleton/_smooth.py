@@ -1,9 +1,10 @@
-"""Offline smoothing of a recorded sequence of joints.
+"""Joint paths smoothed in time: a recording after the fact, or a stream with a latency.
 
 The tracker is causal: each frame's joints come from that frame and the past. A
-recording that is analysed after the fact can also use the frames that follow, and a
-zero-phase smoother then removes the frame-to-frame jitter of the fitted joints
-without the lag of a causal filter. Each joint's path is fitted, around each frame, by
+recording that is analysed after the fact can also use the frames that follow (a live
+stream the few that a latency allows), and a smoother centred on each frame then
+removes the frame-to-frame jitter of the fitted joints without the lag of a causal
+filter. Each joint's path is fitted, around each frame, by
 a quadratic in time weighted by a Gaussian (a Savitzky-Golay filter for irregular
 timestamps): unlike a moving average it keeps the peaks of a movement, such as the
 largest flexion of a knee, where a range of motion is measured. Written here because
@@ -31,7 +32,7 @@ _CHUNK = 4096
 
 
 def smooth_joints(joints, times, sigma: float, *, lag: float | None = None) -> np.ndarray:
-    """Joint paths smoothed in time, without lag (local quadratic fits).
+    """Joint paths smoothed in time (local quadratic fits around each frame).
 
     Each finite joint position is replaced by the value at its frame's time of a
     quadratic fitted by weighted least squares to the same joint over the frames
