@@ -202,6 +202,8 @@ def test_track_smooth_option_writes_smoothed_joints(tmp_path):
         assert result.exit_code == 0, result.output
         data = json.loads((tmp_path / name / "poses.json").read_text())
         outs[name] = np.array([f["joints"] for f in data["frames"]], dtype=float)
+        smoothed = {"sigma_s": 0.1, "lag_s": None} if extra else None
+        assert data["smoothing"] == smoothed  # the outputs say how they were made
     want = smooth_joints(outs["raw"], np.arange(10) / 30.0, 0.1)
     np.testing.assert_allclose(outs["smooth"], want, atol=1e-9)
     assert not np.allclose(outs["smooth"], outs["raw"])

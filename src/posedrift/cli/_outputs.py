@@ -149,6 +149,7 @@ def write_outputs(
     body: bool = True,
     stride: int | None = None,
     joint_convention: str = "native",
+    smoothing: dict | None = None,
 ) -> dict[str, Path]:
     """Write poses (JSON, CSV, BVH), the animation, the viewer and the angle plot.
 
@@ -160,7 +161,14 @@ def write_outputs(
 
     out.mkdir(parents=True, exist_ok=True)
     written = dict(
-        write_poses(results, out, intrinsics=intrinsics, fps=fps, joint_convention=joint_convention)
+        write_poses(
+            results,
+            out,
+            intrinsics=intrinsics,
+            fps=fps,
+            joint_convention=joint_convention,
+            smoothing=smoothing,
+        )
     )
     stride = stride or video_stride(len(results))
     jobs = []

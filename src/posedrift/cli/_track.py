@@ -173,6 +173,7 @@ def track(
                 viewer=viewer,
                 stride=stride,
                 joint_convention=convention,
+                smoothing={"sigma_s": smooth, "lag_s": smooth_lag} if smooth else None,
             )
             if point_clouds:
                 from posedrift.io import write_point_clouds

@@ -6,7 +6,7 @@ import csv
 import json
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -63,6 +63,7 @@ def write_poses(
     intrinsics: Intrinsics,
     fps: float | None = None,
     joint_convention: str = "native",
+    smoothing: Mapping[str, float | None] | None = None,
 ) -> dict[str, Path]:
     """Write ``poses.json``, ``poses.csv`` and ``poses.bvh`` for a tracked sequence.
 
@@ -81,6 +82,10 @@ def write_poses(
         The skeleton convention the results' joints are in, recorded in
         ``poses.json`` (``"native"``, or e.g. ``"kinect"`` after
         :func:`posedrift.skeleton.to_convention`); the joints are written as given.
+    smoothing : mapping, optional
+        How the results' joints were smoothed in time, recorded in ``poses.json``
+        (``{"sigma_s": ..., "lag_s": ...}``, :func:`posedrift.tracking.smooth_results`);
+        None (``null``): as tracked, frame by frame.
 
     Returns
     -------
@@ -92,7 +97,7 @@ def write_poses(
     -----
     ``poses.json`` is the METHOD section 6 schema (``intrinsics``, ``joint_names``,
     ``angle_names``, ``frames`` with :meth:`FrameResult.to_json` objects) plus
-    ``fps``, ``joint_convention`` and, per frame, ``bvh_pose``: ``"recovered"`` where
+    ``fps``, ``joint_convention``, ``smoothing`` and, per frame, ``bvh_pose``: ``"recovered"`` where
     the BVH frame holds this frame's pose, ``"held"`` where the frame had no complete
     pose and the BVH repeats the last known one. Joints are metres in the camera frame.
 
@@ -145,6 +150,7 @@ def write_poses(
         "intrinsics": intrinsics.to_dict(),
         "fps": rate,
         "joint_convention": joint_convention,
+        "smoothing": None if smoothing is None else dict(smoothing),
         "joint_names": list(JOINT_NAMES),
         "angle_names": list(ANGLE_NAMES),
         "frames": frames,
