@@ -50,7 +50,7 @@ for d in 2.0 3.5; do
 done
 # Ablations of the tracker.
 ablations=cpd,cpd-paper,icp-paper,cpd-norelabel,cpd-novotes,cpd-rigid,cpd-cold,cpd-reinit,\
-cpd-nofallback,cpd-nobrace
+cpd-nofallback,cpd-nobrace,cpd-noislands
 posedrift -q eval synthetic builtin "$M/cmu/002_07.bvh" --frames 500 \
     --methods "$ablations,cpd-200,cpd-800" \
     --json "$out/ablations.json" --no-paper | tee "$out/ablations.md"

@@ -28,6 +28,7 @@ _METHODS_HELP = (
     "cpd-level (every camera taken for level: no tilt measured, no high net), "
     "cpd-nobrace (the hips where the thighs put them, no braced pelvis), "
     "cpd-nohold (joints outside the image from the prediction, no limbs held), "
+    "cpd-noislands (stray upper-arm points fitted as labelled), "
     "cpd-200, cpd-400, cpd-800, cpd-fullres."
 )
 

@@ -173,6 +173,10 @@ METHODS: dict[str, tuple[str, MethodFactory]] = {
         "limbs held)",
         _tracker(hold_unseen=False),
     ),
+    "cpd-noislands": (
+        "ablation: stray upper-arm points fitted as labelled (no islands merged)",
+        _tracker(merge_islands=False),
+    ),
     "cpd-200": ("ablation: 200 points", _tracker(n_points=200)),
     "cpd-400": ("ablation: 400 points (the default)", _tracker(n_points=400)),
     "cpd-800": ("ablation: 800 points", _tracker(n_points=800)),

@@ -21,7 +21,8 @@ from posedrift.labelling._relabel import (
     GeodesicGraph,
     geodesic_distances,
     geodesic_graph,
+    merge_islands,
     relabel,
 )
 
-__all__ += ["GeodesicGraph", "geodesic_distances", "geodesic_graph", "relabel"]
+__all__ += ["GeodesicGraph", "geodesic_distances", "geodesic_graph", "merge_islands", "relabel"]
