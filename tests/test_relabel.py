@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from posedrift.labelling import geodesic_distances, geodesic_graph, relabel
+from posedrift.labelling import geodesic_distances, geodesic_graph, merge_islands, relabel
 from posedrift.points import sample_humanoid
-from posedrift.skeleton import JOINT_INDEX, PART_JOINTS, t_pose_joints
-from posedrift.skeleton._fit import bone_anchors, prior_bone_lengths
+from posedrift.skeleton import JOINT_INDEX, PART_INDEX, PART_JOINTS, t_pose_joints
+from posedrift.skeleton._fit import bone_anchors, part_boundaries, prior_bone_lengths
 from posedrift.tracking._init import measure_reach
 
 
@@ -97,6 +97,65 @@ def test_relabel_fixes_stray_labels(body):
     )
     assert np.mean(out[stray[far]] == labels[stray[far]]) > 0.9
     assert np.sum(out != labels) < 0.3 * wrong_before
+
+
+UPPER_ARMS = (PART_INDEX["right_upper_arm"], PART_INDEX["left_upper_arm"])
+
+
+def test_merge_islands_identity_on_whole_parts(body):
+    _, points, labels = body
+    graph = geodesic_graph(points)
+    assert merge_islands(labels, graph, UPPER_ARMS) is labels
+    assert merge_islands(labels, graph, range(15)) is labels  # every part in one piece
+
+
+def test_merge_islands_gives_a_forearm_its_points_back_and_the_elbow_its_place(body):
+    # A few forearm points near the wrist labelled upper arm (a forearm pointed at the
+    # camera, its elbow hidden) make an upper-arm/forearm boundary far from the elbow.
+    joints, points, labels = body
+    graph = geodesic_graph(points)
+    ua, fa = PART_INDEX["left_upper_arm"], PART_INDEX["left_forearm"]
+    forearm = np.flatnonzero(labels == fa)
+    wrist = joints[JOINT_INDEX["left_hand"]]
+    stray = forearm[np.argsort(np.linalg.norm(points[forearm] - wrist, axis=1))[:4]]
+    noisy = labels.copy()
+    noisy[stray] = ua
+    merged = merge_islands(noisy, graph, UPPER_ARMS)
+    assert merged is not noisy and np.array_equal(merged, labels)
+    assert merged.dtype == noisy.dtype
+
+    def boundary(lab):  # the centre of the upper-arm/forearm boundary (the elbow's evidence)
+        centres, _ = part_boundaries(points, lab, graph.rows, graph.cols)
+        return centres[ua, fa]
+
+    true = boundary(labels)
+    assert np.linalg.norm(boundary(noisy) - true) > 0.05  # metres: pulled down the forearm
+    assert np.linalg.norm(boundary(merged) - true) < 1e-9
+
+
+def test_merge_islands_limits():
+    # A row of 2 cm steps: label 1 at 0-9, then label 0, with pieces of label 1 of
+    # 3 and 5 points and a lone point in between.
+    points = np.column_stack([np.arange(40) * 0.02, np.zeros(40), np.full(40, 2.0)])
+    graph = geodesic_graph(points, k=2)
+    labels = np.zeros(40, dtype=np.int16)
+    labels[:10] = 1
+    labels[15:18] = 1  # 3 points: merged
+    labels[25:30] = 1  # 5 points
+    labels[35] = 1
+    out = merge_islands(labels, graph, [1], max_points=4)
+    assert out[15:18].tolist() == [0, 0, 0] and out[25:30].tolist() == [1] * 5
+    assert out[35] == 0 and out[:10].tolist() == [1] * 10
+    # No more than max_share of the part's points.
+    out = merge_islands(labels, graph, [1], max_points=8, max_share=0.2)
+    assert out[15:18].tolist() == [0, 0, 0] and out[25:30].tolist() == [1] * 5
+    # A piece whose only neighbours are unlabelled keeps its label.
+    unlabelled = labels.copy()
+    unlabelled[14] = unlabelled[18] = -1
+    out = merge_islands(unlabelled, graph, [1], max_points=4)
+    assert out[15:18].tolist() == [1, 1, 1] and out[14] == -1
+    # Parts with fewer than two points, and parts absent, change nothing.
+    assert merge_islands(labels, graph, [7, 1], max_points=0) is labels
 
 
 def test_relabel_paper_rule_without_evidence():

@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 
 from posedrift.camera import DepthFrame, camera_preset
-from posedrift.skeleton import ANGLE_NAMES, JOINT_INDEX, JOINT_NAMES, JOINT_PARENTS, joint_angles
+from posedrift.skeleton import (
+    ANGLE_NAMES,
+    JOINT_INDEX,
+    JOINT_NAMES,
+    JOINT_PARENTS,
+    PART_NAMES,
+    joint_angles,
+)
 from posedrift.tracking import FrameResult, FrameStatus, PoseTracker
 
 K = camera_preset("kinect1-qvga")
@@ -122,6 +129,30 @@ def test_holding_unseen_joints_changes_nothing_while_the_body_is_in_view(sequenc
     np.testing.assert_array_equal(runs[True], runs[False])
 
 
+def test_upper_arm_islands_are_merged_on_tracked_frames_only(sequence, monkeypatch):
+    """``merge_islands`` cleans the labels each tracked frame's skeleton is fitted to,
+    never a first frame's (whose sparse upper arm may lie in pieces), and off is off."""
+    from posedrift.tracking import _tracker
+
+    calls = []
+    real = _tracker.merge_islands
+
+    def spy(labels, graph, parts, **kw):
+        calls.append(tuple(parts))
+        return real(labels, graph, parts, **kw)
+
+    monkeypatch.setattr(_tracker, "merge_islands", spy)
+    for merge in (True, False):
+        calls.clear()
+        tracker = PoseTracker(K, forest=LabelImages(sequence), merge_islands=merge)
+        first = tracker.process(sequence.frames[0])
+        assert first.status is FrameStatus.REINITIALIZED and not calls
+        tracked = _run(tracker, sequence.frames[1:4])
+        assert all(r.has_pose for r in tracked)
+        upper_arms = (PART_NAMES.index("right_upper_arm"), PART_NAMES.index("left_upper_arm"))
+        assert set(calls) == ({upper_arms} if merge else set())
+
+
 def test_running_median_is_the_median_of_the_window():
     from posedrift.tracking._tracker import _RunningMedian
 
@@ -164,7 +195,6 @@ def test_limb_lengths_take_the_median_and_stop(sequence):
     from posedrift.camera import backproject
     from posedrift.labelling._relabel import geodesic_graph
     from posedrift.points import downsample
-    from posedrift.skeleton import PART_NAMES
     from posedrift.tracking._init import LimbLengths, calibrate
 
     frame, truth = sequence.frames[0], sequence.reference.labels[0]  # the T-pose
