@@ -403,13 +403,14 @@ class PoseTracker:
         above the image: 15.31 -> 13.61 degrees over five samples (docs/RESULTS.md).
         False fills them in from the prediction, as ``fit_skeleton`` does.
     merge_islands : bool
-        Relabel stray upper-arm points before each tracked frame's skeleton fit (beyond the paper;
-        :func:`~posedrift.labelling.merge_islands`): a piece of at most 8 points
-        labelled upper arm, cut off in the graph from the arm's main piece, takes its
-        neighbours' label. With a forearm pointed at the camera its elbow is hidden,
-        and a few of its points labelled upper arm otherwise make an elbow 10-15 cm in
-        front of the true one (the built-in motion's drift: 1.29x -> 1.10x over five
-        samples; docs/RESULTS.md, "Drift"). False fits the labels as they are.
+        Relabel stray upper-arm points before each tracked frame's skeleton fit
+        (beyond the paper; :func:`~posedrift.labelling.merge_islands`): a piece of at
+        most 8 points labelled upper arm, cut off in the graph from the arm's main
+        piece, takes its neighbours' label. With a forearm pointed at the camera its
+        elbow is hidden, and a few of its points labelled upper arm otherwise make an
+        elbow 10-15 cm in front of the true one (the built-in motion's drift: 1.29x ->
+        1.10x over five samples; docs/RESULTS.md, "Drift"). False fits the labels as
+        they are.
     blas_threads : int or None
         Threads the BLAS library may use while a frame is processed (the part net's
         matrix products). The matrices are small: on two cores, two threads made one
