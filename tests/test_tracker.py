@@ -540,6 +540,25 @@ def test_the_part_net_labels_by_default_and_keeps_the_labels_on_a_rendered_clip(
         PoseTracker(K, part_net="default")
 
 
+def test_models_loaded_up_front_change_no_result(sequence):
+    """load_models loads what the first frame would, keeps given models and returns the
+    tracker; the results are those of lazy loading."""
+    from posedrift.labelling import BodyPartForest, BodyPartNet, FacingNets
+
+    eager = PoseTracker(K)
+    assert eager.forest is None and eager.part_net is None
+    assert eager.load_models() is eager
+    assert isinstance(eager.forest, BodyPartForest)
+    assert isinstance(eager.part_net, FacingNets)
+    frames = sequence.frames[:5]
+    for a, b in zip(_run(eager, frames), _run(PoseTracker(K), frames), strict=True):
+        np.testing.assert_array_equal(a.joints, b.joints)
+    net = BodyPartNet.load_default()
+    given = PoseTracker(K, part_net=net).load_models()
+    assert given.part_net is net
+    assert PoseTracker(K, part_net="none").load_models().part_net == "none"
+
+
 class CountingNet:
     """A part net that counts the frames it labels."""
 

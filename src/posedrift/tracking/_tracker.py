@@ -630,6 +630,23 @@ class PoseTracker:
         self._level_cache: tuple[np.ndarray, np.ndarray] | None = None
         self._seed_registration = None
 
+    def load_models(self) -> PoseTracker:
+        """Load the forest and the part nets now instead of on the first frame.
+
+        They are otherwise loaded lazily, which makes the first call of
+        :meth:`process` take a few hundred milliseconds; load them first where
+        frames are timed or come from a live camera. Models given to the
+        constructor are kept; loading twice does nothing more.
+
+        Returns
+        -------
+        PoseTracker
+            This tracker.
+        """
+        self._get_forest()
+        self._get_labeller()
+        return self
+
     @property
     def calibration(self) -> Calibration | None:
         """The person's calibration (stature, bone lengths), once initialized."""
