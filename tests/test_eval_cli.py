@@ -200,6 +200,24 @@ def test_parse_methods():
         parse_methods("cpd,nope")
 
 
+def test_net_ablations_take_their_nets_from_the_shared_ones():
+    """cpd-frontal keeps the frontal net alone, cpd-noback the nets without the back
+    one; each from the nets the run shares, or the shipped ones."""
+    from posedrift.evaluation._harness import METHODS
+    from posedrift.labelling import BodyPartNet, FacingNets
+
+    K = camera_preset("kinect1-qvga")
+    shipped = FacingNets.load_default()
+    assert METHODS["cpd"][1](K, part_net=shipped).part_net.back is shipped.back
+    assert METHODS["cpd-frontal"][1](K).part_net is shipped.frontal
+    for shared in (None, shipped):
+        nets = METHODS["cpd-noback"][1](K, part_net=shared).part_net
+        assert nets.back is None and nets.turned is shipped.turned
+        assert nets.frontal is shipped.frontal and nets.high is shipped.high
+    alone = BodyPartNet.load_default()
+    assert METHODS["cpd-noback"][1](K, part_net=alone).part_net is alone
+
+
 class OracleForest:
     """Test-only: the ground-truth label images as the forest's prediction."""
 

@@ -415,6 +415,24 @@ def test_training_frames_are_seeded_and_show_a_person():
         next(synthetic_training_frames(1, [motion], weights=[0.0], rng=0))
 
 
+def test_wide_views_turn_between_their_smallest_and_largest_yaw():
+    from posedrift.labelling._train import SceneRanges
+
+    u = np.linspace(-1.0, 1.0, 201)
+    default = SceneRanges()
+    # Without a smallest turn the draw is what it always was (the shipped models' views).
+    assert [default.view_yaw(x, True) for x in u] == list(u * 100.0)
+    assert [default.view_yaw(x, False) for x in u] == list(u * 45.0)
+    behind = SceneRanges(wide_yaw=180.0, wide_min_yaw=120.0)
+    yaws = np.array([behind.view_yaw(x, True) for x in u if x != 0.0])
+    assert np.all(np.abs(yaws) >= 120.0) and np.all(np.abs(yaws) <= 180.0)
+    assert np.all(np.sign(yaws) == np.sign(u[u != 0.0]))  # either way round
+    assert behind.view_yaw(1.0, True) == 180.0 and behind.view_yaw(-1e-9, True) < -119.99
+    assert behind.view_yaw(0.5, False) == 22.5  # the frontal views keep their range
+    with pytest.raises(ValueError, match="'wide_min_yaw' of SceneRanges"):
+        SceneRanges(wide_yaw=90.0, wide_min_yaw=120.0)
+
+
 def test_mirrored_poses_render_as_mirror_images_with_sides_swapped():
     from posedrift.labelling._train import _facing, mirror_pose, render_training_frame
     from posedrift.synthetic import BodyModel, procedural_motion

@@ -21,7 +21,8 @@ from posedrift.cli._options import (
 _METHODS_HELP = (
     "Comma-separated methods: cpd, shotton, pda, icp, shotton-net (Shotton's joints from "
     "the part net's labels), and the ablations cpd-frontal (the frontal part net for "
-    "every view, no turned net), cpd-forest (the forest's labels, no part net), cpd-paper, "
+    "every view, no turned net), cpd-noback (the turned net for a person's back too, no "
+    "back net), cpd-forest (the forest's labels, no part net), cpd-paper, "
     "icp-paper (the paper's pure tracking, no per-frame evidence), "
     "cpd-norelabel, cpd-novotes (no joint votes), cpd-rigid, cpd-cold, cpd-reinit (a failed "
     "track always re-initialized), cpd-nofallback (CPD alone, no ICP second opinion), "

@@ -37,7 +37,7 @@ NetOption = Annotated[
     typer.Option(
         "--net",
         help="Body-part net file that labels the trackers' pixels (default: the shipped "
-        "frontal, turned and high nets); 'none' leaves the labels to the forest.",
+        "frontal, turned, high and back nets); 'none' leaves the labels to the forest.",
     ),
 ]
 TurnedNetOption = Annotated[

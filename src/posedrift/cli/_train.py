@@ -77,6 +77,16 @@ def train(
             "--wide-yaw", min=0.0, max=180.0, help="Largest turn of the wide views, degrees."
         ),
     ] = 100.0,
+    wide_min_yaw: Annotated[
+        float,
+        typer.Option(
+            "--wide-min-yaw",
+            min=0.0,
+            max=180.0,
+            help="Smallest turn of the wide views, degrees (120 with --wide-share 1 "
+            "--wide-yaw 180: people seen from behind only).",
+        ),
+    ] = 0.0,
     camera_heights: Annotated[
         str,
         typer.Option(
@@ -134,10 +144,10 @@ def train(
     Poses come from the BVH clips (all but the held-out ones; near-duplicate poses
     dropped, --min-pose-distance) and the procedural motion, bodies of varied height,
     girth and build, views within 45 degrees of frontal at 2-3.5 m and (--wide-share
-    of the frames) wider views up to --wide-yaw degrees from frontal at 1-4.5 m,
-    Kinect-like noise on half of the frames. For a forest, then, on --vote-frames
-    fresh frames drawn the same way, each leaf learns its pixels' offsets to the
-    joints near them (joint votes). A net (--classifier net) keeps its sampled
+    of the frames) wider views turned --wide-min-yaw to --wide-yaw degrees from
+    frontal at 1-4.5 m, Kinect-like noise on half of the frames. For a forest, then, on
+    --vote-frames fresh frames drawn the same way, each leaf learns its pixels' offsets
+    to the joints near them (joint votes). A net (--classifier net) keeps its sampled
     pixels' features in memory as float16: frames x pixels x offsets x 2 bytes.
 
     Example: posedrift train --frames 2000 --seed 0 --out forest.npz
@@ -171,6 +181,8 @@ def train(
             f"--camera-heights must be LOW,HIGH metres with 0 < LOW <= HIGH < 5. "
             f"Got {camera_heights!r}."
         ) from None
+    if wide_min_yaw > wide_yaw:
+        raise fail(f"--wide-min-yaw ({wide_min_yaw:g}) must not exceed --wide-yaw ({wide_yaw:g}).")
     if classifier == "forest":
         try:
             import sklearn  # noqa: F401
@@ -211,6 +223,7 @@ def train(
             camera_height=heights,
             wide_fraction=wide_share,
             wide_yaw=wide_yaw,
+            wide_min_yaw=wide_min_yaw,
             mirror_fraction=mirror_share,
         )
         generator = tr.synthetic_training_frames(
@@ -225,6 +238,7 @@ def train(
             "procedural_share": share,
             "wide_share": wide_share,
             "wide_yaw": wide_yaw,
+            "wide_min_yaw": wide_min_yaw,
             "mirror_share": mirror_share,
             "camera_heights": list(heights),
             "min_pose_distance": min_pose_distance,

@@ -12,7 +12,7 @@ import logging
 import time
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -57,19 +57,30 @@ def _tracker(**options: Any) -> MethodFactory:
     return factory
 
 
-def _frontal_tracker() -> MethodFactory:
-    """The tracker with the frontal net of the shared pair alone (no turned net)."""
+def _frontal_net(nets: Any) -> Any:
+    """A FacingNets' frontal net (or the one net given): no turned, high or back net."""
+    return getattr(nets, "frontal", nets)
+
+
+def _without_back_net(nets: Any) -> Any:
+    """A FacingNets without its back net (the turned net labels every turned view)."""
+    from posedrift.labelling import FacingNets
+
+    return replace(nets, back=None) if isinstance(nets, FacingNets) else nets
+
+
+def _tracker_with_nets(choose: Callable[[Any], Any]) -> MethodFactory:
+    """The tracker with ``choose(shared part nets)`` labelling its pixels."""
     whole = _tracker()
 
     def factory(
         intrinsics: Intrinsics, *, forest: Any = None, part_net: Any = None, rng: int = 0
     ) -> PoseMethod:
         if part_net is None:
-            from posedrift.labelling import BodyPartNet
+            from posedrift.labelling import FacingNets
 
-            part_net = BodyPartNet.load_default()
-        frontal = getattr(part_net, "frontal", part_net)  # a FacingNets pair's, or the net
-        return whole(intrinsics, forest=forest, part_net=frontal, rng=rng)
+            part_net = FacingNets.load_default()
+        return whole(intrinsics, forest=forest, part_net=choose(part_net), rng=rng)
 
     factory.seeded = True  # type: ignore[attr-defined]
     factory.takes_part_net = True  # type: ignore[attr-defined]
@@ -131,7 +142,11 @@ METHODS: dict[str, tuple[str, MethodFactory]] = {
     ),
     "cpd-frontal": (
         "ablation: the frontal part net alone, for every view (no turned net)",
-        _frontal_tracker(),
+        _tracker_with_nets(_frontal_net),
+    ),
+    "cpd-noback": (
+        "ablation: the turned net for every turned view, the back too (no back net)",
+        _tracker_with_nets(_without_back_net),
     ),
     "cpd-forest": (
         "ablation: the forest labels the pixels, no part net (the tracker before the net)",

@@ -58,14 +58,17 @@ _DEFAULT_MODELS = {
     "frontal": "part_net_default.npz",
     "turned": "part_net_turned.npz",
     "high": "part_net_high.npz",
+    "back": "part_net_back.npz",
 }
 """The shipped nets: trained on views within 45 (30% of them up to 100) degrees of
-frontal, on views turned any way (``--wide-share 1 --wide-yaw 180``), and on frontal
-views from cameras up to 2.4 m high (``--camera-heights 0.7,2.4``)."""
+frontal, on views turned any way (``--wide-share 1 --wide-yaw 180``), on frontal
+views from cameras up to 2.4 m high (``--camera-heights 0.7,2.4``), and on people
+seen from behind (``--wide-min-yaw 120``)."""
 _TRAIN_COMMANDS = {
     "frontal": "posedrift train --classifier net",
     "turned": "posedrift train --classifier net --wide-share 1 --wide-yaw 180",
     "high": "posedrift train --classifier net --camera-heights 0.7,2.4",
+    "back": "posedrift train --classifier net --wide-share 1 --wide-yaw 180 --wide-min-yaw 120",
 }
 _KEYS = ("part_names", "metadata", "reference_focal", "background", "clip", "offsets", "n_layers")
 """What a model file holds besides its format, version and layers."""
@@ -297,7 +300,7 @@ class BodyPartNet:
 
         Parameters
         ----------
-        views : {"frontal", "turned", "high"}
+        views : {"frontal", "turned", "high", "back"}
             ``"frontal"``: trained on people facing the camera (within 45 degrees,
             and 30% of the frames up to 100), the net that labels the tracker's
             pixels; ``"turned"``: trained on people turned any way, up to their back
@@ -307,7 +310,9 @@ class BodyPartNet:
             docs/results-log.md). ``"high"``: the frontal net's training with cameras
             0.7-2.4 m high instead of 0.7-1.3 (half of them aimed at the pelvis),
             asked in the frontal net's place where the camera looks down; on level
-            cameras it is the worse of the two (docs/results-log.md).
+            cameras it is the worse of the two (docs/results-log.md). ``"back"``:
+            the turned net's training with every view turned 120-180 degrees away, which
+            the tracker asks once its skeleton shows the person's back.
         """
         if views not in _DEFAULT_MODELS:
             raise ValueError(
@@ -376,6 +381,9 @@ class FacingNets:
     Where ``high`` is given and the camera looks down more than ``high_gate``
     degrees (the tracker measures the tilt at calibration,
     :func:`posedrift.tracking.world_up`), ``high`` takes the frontal net's place.
+    Where ``back`` is given and the skeleton has turned more than ``back_gate``
+    degrees, the person shows their back and ``back`` labels: a net that saw only
+    backs need not tell a back from a front, which decides left from right.
 
     Parameters
     ----------
@@ -388,6 +396,12 @@ class FacingNets:
     high_gate : float
         Degrees in [0, 90]: the shipped frontal net saw cameras up to about 8 degrees
         off level, and real recordings from a level camera read up to 7.
+    back : BodyPartNet, optional
+        The net for a person seen from behind.
+    back_gate : float
+        Degrees in [0, 180]. The shipped back net saw turns of 120-180 degrees; the
+        gate sits further out because the skeleton's own facing lags a turn (on the
+        development clips 135 and 145 cost, 155 and 165 gained: docs/results-log.md).
 
     Examples
     --------
@@ -398,6 +412,8 @@ class FacingNets:
     True
     >>> nets.select(10.0, tilt=24.0) is nets.high  # a camera looking 24 degrees down
     True
+    >>> nets.select(170.0) is nets.back  # the person's back to the camera
+    True
     """
 
     frontal: Any
@@ -405,9 +421,11 @@ class FacingNets:
     turn_gate: float = 45.0
     high: Any = None
     high_gate: float = 12.0
+    back: Any = None
+    back_gate: float = 155.0
 
     def __post_init__(self) -> None:
-        for name, top in (("turn_gate", 180.0), ("high_gate", 90.0)):
+        for name, top in (("turn_gate", 180.0), ("high_gate", 90.0), ("back_gate", 180.0)):
             gate = check_scalar(
                 getattr(self, name),
                 name,
@@ -421,19 +439,23 @@ class FacingNets:
 
     @classmethod
     def load_default(cls, turn_gate: float = 45.0) -> FacingNets:
-        """The shipped frontal, turned and high nets (:meth:`BodyPartNet.load_default`)."""
+        """The shipped frontal, turned, high and back nets (:meth:`BodyPartNet.load_default`)."""
         return cls(
             BodyPartNet.load_default("frontal"),
             BodyPartNet.load_default("turned"),
             turn_gate=turn_gate,
             high=BodyPartNet.load_default("high"),
+            back=BodyPartNet.load_default("back"),
         )
 
     def select(self, facing_yaw: float | None, *, tilt: float | None = None) -> Any:
         """The net for a person turned ``facing_yaw`` degrees away (None, NaN: frontal),
         seen by a camera looking ``tilt`` degrees down (None: level)."""
-        if facing_yaw is not None and facing_yaw > self.turn_gate:  # NaN compares False
-            return self.turned
+        if facing_yaw is not None:  # NaN compares False below
+            if self.back is not None and facing_yaw > self.back_gate:
+                return self.back
+            if facing_yaw > self.turn_gate:
+                return self.turned
         if self.high is not None and tilt is not None and tilt > self.high_gate:
             return self.high
         return self.frontal

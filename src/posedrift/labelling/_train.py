@@ -7,6 +7,7 @@ the net (:func:`train_net`), loading and inference need NumPy alone.
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
@@ -703,6 +704,10 @@ class SceneRanges:
         Metres.
     wide_aim, wide_yaw : float
         Degrees.
+    wide_min_yaw : float
+        Degrees: the wide views' smallest turn (their turn is drawn uniformly between
+        it and ``wide_yaw``, either way round). 0: any turn up to ``wide_yaw``; 120
+        with ``wide_yaw`` 180: people seen from behind only.
     mirror_fraction : float
         Share of frames whose pose is mirrored left for right (:func:`mirror_pose`):
         every asymmetric clip pose then also appears the other way round.
@@ -719,7 +724,25 @@ class SceneRanges:
     wide_distance: tuple[float, float] = (1.0, 4.5)
     wide_aim: float = 25.0
     wide_yaw: float = 100.0
+    wide_min_yaw: float = 0.0
     mirror_fraction: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.wide_min_yaw <= self.wide_yaw:
+            raise ValueError(
+                f"The 'wide_min_yaw' of SceneRanges must lie in [0, wide_yaw = "
+                f"{self.wide_yaw:g}] degrees. Got {self.wide_min_yaw!r}."
+            )
+
+    def view_yaw(self, u: float, wide: bool) -> float:
+        """The person's turn in degrees for a uniform draw ``u`` in [-1, 1].
+
+        One draw either way, so that a smallest turn leaves the random stream as it was.
+        """
+        if not wide:
+            return u * self.yaw
+        low = self.wide_min_yaw
+        return math.copysign(low + abs(u) * (self.wide_yaw - low), u)
 
 
 def mirror_pose(
@@ -1058,7 +1081,7 @@ def synthetic_training_frames(
             extras,
             shaped,
             intrinsics,
-            yaw=rng.uniform(-1.0, 1.0) * (ranges.wide_yaw if wide else ranges.yaw),
+            yaw=ranges.view_yaw(rng.uniform(-1.0, 1.0), wide),
             distance=rng.uniform(*(ranges.wide_distance if wide else ranges.distance)),
             camera_height=rng.uniform(*ranges.camera_height),
             aim_at_body=bool(rng.uniform() < 0.5),
