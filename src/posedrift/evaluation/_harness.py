@@ -581,8 +581,8 @@ def _default_forest() -> Any:
 
 
 def _default_part_net() -> Any:
-    """The shipped part nets (frontal and turned), or "none" (the forest labels) where
-    they cannot be loaded."""
+    """The shipped part nets (:meth:`FacingNets.load_default`), or "none" (the forest
+    labels) where they cannot be loaded."""
     from posedrift.labelling import FacingNets
 
     try:

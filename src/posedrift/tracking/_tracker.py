@@ -282,9 +282,10 @@ class PoseTracker:
         beyond the paper: a perceptron over depth-comparison features that labels
         pixels more accurately than the forest (docs/RESULTS.md). A
         :class:`~posedrift.labelling.FacingNets` pair labels with its frontal net
-        while the last skeleton faces the camera and with its turned net once that
-        skeleton has turned away beyond its ``turn_gate``. When None, the shipped
-        pair (``FacingNets.load_default()``, loaded lazily) if ``forest`` is None
+        while the last skeleton faces the camera, with its turned net once that
+        skeleton has turned away beyond its ``turn_gate``, and with its back net (if
+        any) beyond its ``back_gate``. When None, the shipped nets
+        (``FacingNets.load_default()``, loaded lazily) if ``forest`` is None
         too, else the given forest labels, as before there was a net. ``"none"``
         (also the fallback where no net can be loaded) leaves the labels to the
         forest, as in the paper. Any object with the net's ``predict_pixels`` works.
