@@ -591,6 +591,25 @@ def test_the_turned_net_takes_over_once_the_skeleton_turns_past_the_gate(sequenc
             assert np.all(yaws > 0) and turned.calls >= len(frames) - 1 and frontal.calls >= 1
 
 
+def test_the_back_net_takes_over_beyond_its_gate(sequence):
+    """With a back net, the nets are asked by the last skeleton's facing: beyond
+    back_gate the back net, whatever the turn gate; with none, the turned net."""
+    from posedrift.labelling import BodyPartNet, FacingNets
+
+    frames = sequence.frames[:12]
+    for back_gate in (180.0, 0.0):
+        frontal = CountingNet(BodyPartNet.load_default())
+        turned = CountingNet(BodyPartNet.load_default("turned"))
+        back = CountingNet(BodyPartNet.load_default("back"))
+        nets = FacingNets(frontal, turned, turn_gate=0.0, back=back, back_gate=back_gate)
+        results = _run(PoseTracker(K, part_net=nets), frames)
+        assert all(r.has_pose for r in results)
+        if back_gate == 180.0:  # never beyond: the turned net, as without a back net
+            assert back.calls == 0 and turned.calls >= len(frames) - 1
+        else:  # the first frame has no skeleton to tell: the frontal net initializes
+            assert turned.calls == 0 and back.calls >= len(frames) - 1 and frontal.calls >= 1
+
+
 def test_a_person_too_near_the_camera_is_measured_and_tracked():
     """At 1.6 m the person runs off the image's top and bottom (head and feet cut off)."""
     from posedrift.synthetic import build_sequence, procedural_motion
