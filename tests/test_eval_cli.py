@@ -202,7 +202,8 @@ def test_parse_methods():
 
 def test_net_ablations_take_their_nets_from_the_shared_ones():
     """cpd-frontal keeps the frontal net alone, cpd-noback the nets without the back
-    one; each from the nets the run shares, or the shipped ones."""
+    one, cpd-noside without the side one; each from the nets the run shares, or the
+    shipped ones."""
     from posedrift.evaluation._harness import METHODS
     from posedrift.labelling import BodyPartNet, FacingNets
 
@@ -214,8 +215,13 @@ def test_net_ablations_take_their_nets_from_the_shared_ones():
         nets = METHODS["cpd-noback"][1](K, part_net=shared).part_net
         assert nets.back is None and nets.turned is shipped.turned
         assert nets.frontal is shipped.frontal and nets.high is shipped.high
+        nets = METHODS["cpd-noside"][1](K, part_net=shared).part_net
+        assert nets.side is None and nets.back is shipped.back
+        assert nets.turned is shipped.turned and nets.frontal is shipped.frontal
+    assert METHODS["cpd-noback"][1](K).part_net.side is shipped.side
     alone = BodyPartNet.load_default()
     assert METHODS["cpd-noback"][1](K, part_net=alone).part_net is alone
+    assert METHODS["cpd-noside"][1](K, part_net=alone).part_net is alone
 
 
 class OracleForest:

@@ -429,6 +429,11 @@ def test_wide_views_turn_between_their_smallest_and_largest_yaw():
     assert np.all(np.sign(yaws) == np.sign(u[u != 0.0]))  # either way round
     assert behind.view_yaw(1.0, True) == 180.0 and behind.view_yaw(-1e-9, True) < -119.99
     assert behind.view_yaw(0.5, False) == 22.5  # the frontal views keep their range
+    # One side: the same draws' turns, every one showing the left side (positive).
+    left = SceneRanges(wide_yaw=165.0, wide_min_yaw=30.0, wide_left_side=True)
+    both = SceneRanges(wide_yaw=165.0, wide_min_yaw=30.0)
+    assert [left.view_yaw(x, True) for x in u] == [abs(both.view_yaw(x, True)) for x in u]
+    assert left.view_yaw(-0.5, False) == -22.5
     with pytest.raises(ValueError, match="'wide_min_yaw' of SceneRanges"):
         SceneRanges(wide_yaw=90.0, wide_min_yaw=120.0)
 

@@ -91,8 +91,17 @@ def test_facing_yaw_follows_a_turn_about_the_vertical():
         frames.append((world @ turn.T) * [1.0, -1.0, -1.0] + [0.0, 0.0, 3.0])
     got = facing_yaw(np.stack(frames))
     np.testing.assert_allclose(got, [0.0, 30.0, 90.0, 150.0, 180.0, 60.0], atol=1e-9)
+    # Signed: these turns take the person's left side away from the camera (negative)
+    # but the last, which brings it nearer.
+    signed = facing_yaw(np.stack(frames), signed=True)
+    np.testing.assert_allclose(signed[[1, 2, 3, 5]], [-30.0, -90.0, -150.0, 60.0], atol=1e-9)
+    np.testing.assert_allclose(np.abs(signed), got, atol=1e-9)
+    for joints, yaw in zip(frames, signed, strict=True):
+        assert facing_yaw(joints, signed=True) == yaw  # one skeleton: the same value
+        left, right = joints[JOINT_INDEX["left_hip"], 2], joints[JOINT_INDEX["right_hip"], 2]
+        assert abs(yaw) in (0.0, 180.0) or (yaw > 0) == (left < right)
     unknown = np.full((15, 3), np.nan)
-    assert np.isnan(facing_yaw(unknown))
+    assert np.isnan(facing_yaw(unknown)) and np.isnan(facing_yaw(unknown, signed=True))
 
 
 def test_facing_yaw_of_one_skeleton_is_the_batched_value_to_the_last_bit():
@@ -106,6 +115,9 @@ def test_facing_yaw_of_one_skeleton_is_the_batched_value_to_the_last_bit():
     batched = facing_yaw(skeletons)
     one = np.array([facing_yaw(s) for s in skeletons])
     np.testing.assert_array_equal(one, batched)  # NaN where the batch has NaN
+    signed = np.array([facing_yaw(s, signed=True) for s in skeletons])
+    np.testing.assert_array_equal(signed, facing_yaw(skeletons, signed=True))
+    np.testing.assert_array_equal(np.abs(signed), batched)
     assert np.isnan(one).any() and np.isfinite(one).sum() > 1500
     # A skeleton level with the camera's centre (no horizontal direction to it): NaN.
     level = np.zeros((15, 3))

@@ -591,6 +591,54 @@ def test_the_turned_net_takes_over_once_the_skeleton_turns_past_the_gate(sequenc
             assert np.all(yaws > 0) and turned.calls >= len(frames) - 1 and frontal.calls >= 1
 
 
+class LoggingNet(CountingNet):
+    """A part net that writes its name to a shared log each time it labels."""
+
+    def __init__(self, net, name, log):
+        super().__init__(net)
+        self.name, self.log = name, log
+
+    def predict_pixels(self, *args, **kwargs):
+        self.log.append(self.name)
+        return super().predict_pixels(*args, **kwargs)
+
+    def mirrored(self):
+        return LoggingNet(self.net.mirrored(), "right", self.log)
+
+
+def test_the_side_net_labels_once_three_skeletons_show_the_same_side(sequence):
+    """With a side net (and every turn beyond its gates), a frame is labelled by the
+    side net of the side that the last three skeletons all showed, else by the turned
+    net; a frame labelled afresh never asks the side nets."""
+    from posedrift.labelling import BodyPartNet, FacingNets
+    from posedrift.skeleton import facing_yaw
+
+    log = []
+    nets = FacingNets(
+        LoggingNet(BodyPartNet.load_default(), "frontal", log),
+        LoggingNet(BodyPartNet.load_default("turned"), "turned", log),
+        turn_gate=0.0,
+        side=LoggingNet(BodyPartNet.load_default("side"), "left", log),
+        side_gate=0.0,
+    )
+    tracker = PoseTracker(K, part_net=nets)
+    sides, asked = [], []
+    for frame in sequence.frames[:30]:
+        log.clear()
+        result = tracker.process(frame)
+        assert result.has_pose
+        asked.append(set(log))
+        sides.append(np.sign(facing_yaw(result.joints, signed=True)))
+    assert asked[0] == {"frontal"}  # the first frame: no skeleton, labelled afresh
+    shown = {1.0: "left", -1.0: "right"}
+    for t in range(1, len(asked)):
+        last = sides[max(t - 3, 0) : t]
+        steady = len(last) == 3 and len(set(last)) == 1
+        assert asked[t] == {shown[last[0]] if steady else "turned"}, t
+    used = set().union(*asked)
+    assert "turned" in used and used & {"left", "right"}
+
+
 def test_the_back_net_takes_over_beyond_its_gate(sequence):
     """With a back net, the nets are asked by the last skeleton's facing: beyond
     back_gate the back net, whatever the turn gate; with none, the turned net."""

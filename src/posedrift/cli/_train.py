@@ -87,6 +87,14 @@ def train(
             "--wide-yaw 180: people seen from behind only).",
         ),
     ] = 0.0,
+    wide_left_side: Annotated[
+        bool,
+        typer.Option(
+            "--wide-left-side",
+            help="Turn every wide view one way, the person's left side towards the "
+            "camera (the side net; the tracker mirrors it for the right side).",
+        ),
+    ] = False,
     camera_heights: Annotated[
         str,
         typer.Option(
@@ -145,7 +153,8 @@ def train(
     dropped, --min-pose-distance) and the procedural motion, bodies of varied height,
     girth and build, views within 45 degrees of frontal at 2-3.5 m and (--wide-share
     of the frames) wider views turned --wide-min-yaw to --wide-yaw degrees from
-    frontal at 1-4.5 m, Kinect-like noise on half of the frames. For a forest, then, on
+    frontal (either way, or with --wide-left-side the left side towards the camera) at
+    1-4.5 m, Kinect-like noise on half of the frames. For a forest, then, on
     --vote-frames fresh frames drawn the same way, each leaf learns its pixels' offsets
     to the joints near them (joint votes). A net (--classifier net) keeps its sampled
     pixels' features in memory as float16: frames x pixels x offsets x 2 bytes.
@@ -224,6 +233,7 @@ def train(
             wide_fraction=wide_share,
             wide_yaw=wide_yaw,
             wide_min_yaw=wide_min_yaw,
+            wide_left_side=wide_left_side,
             mirror_fraction=mirror_share,
         )
         generator = tr.synthetic_training_frames(
@@ -239,6 +249,7 @@ def train(
             "wide_share": wide_share,
             "wide_yaw": wide_yaw,
             "wide_min_yaw": wide_min_yaw,
+            "wide_left_side": wide_left_side,
             "mirror_share": mirror_share,
             "camera_heights": list(heights),
             "min_pose_distance": min_pose_distance,

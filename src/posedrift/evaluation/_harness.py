@@ -58,7 +58,7 @@ def _tracker(**options: Any) -> MethodFactory:
 
 
 def _frontal_net(nets: Any) -> Any:
-    """A FacingNets' frontal net (or the one net given): no turned, high or back net."""
+    """A FacingNets' frontal net (or the one net given): no turned, high, back or side net."""
     return getattr(nets, "frontal", nets)
 
 
@@ -67,6 +67,13 @@ def _without_back_net(nets: Any) -> Any:
     from posedrift.labelling import FacingNets
 
     return replace(nets, back=None) if isinstance(nets, FacingNets) else nets
+
+
+def _without_side_net(nets: Any) -> Any:
+    """A FacingNets without its side net (the turned net labels every side view)."""
+    from posedrift.labelling import FacingNets
+
+    return replace(nets, side=None) if isinstance(nets, FacingNets) else nets
 
 
 def _tracker_with_nets(choose: Callable[[Any], Any]) -> MethodFactory:
@@ -147,6 +154,10 @@ METHODS: dict[str, tuple[str, MethodFactory]] = {
     "cpd-noback": (
         "ablation: the turned net for every turned view, the back too (no back net)",
         _tracker_with_nets(_without_back_net),
+    ),
+    "cpd-noside": (
+        "ablation: the turned net for every side view (no side net)",
+        _tracker_with_nets(_without_side_net),
     ),
     "cpd-forest": (
         "ablation: the forest labels the pixels, no part net (the tracker before the net)",

@@ -20,7 +20,7 @@ from __future__ import annotations
 import itertools
 import json
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from os import PathLike
 from pathlib import Path
 from types import MappingProxyType
@@ -47,7 +47,7 @@ from posedrift.labelling._modelfile import (
     read_model_file,
     read_packaged_model,
 )
-from posedrift.skeleton import PART_NAMES
+from posedrift.skeleton import PART_NAMES, other_side
 
 FORMAT_NAME = "posedrift-body-part-net"
 FORMAT_VERSION = 1
@@ -59,16 +59,20 @@ _DEFAULT_MODELS = {
     "turned": "part_net_turned.npz",
     "high": "part_net_high.npz",
     "back": "part_net_back.npz",
+    "side": "part_net_side.npz",
 }
 """The shipped nets: trained on views within 45 (30% of them up to 100) degrees of
 frontal, on views turned any way (``--wide-share 1 --wide-yaw 180``), on frontal
-views from cameras up to 2.4 m high (``--camera-heights 0.7,2.4``), and on people
-seen from behind (``--wide-min-yaw 120``)."""
+views from cameras up to 2.4 m high (``--camera-heights 0.7,2.4``), on people
+seen from behind (``--wide-min-yaw 120``), and on people showing their left side
+(``--wide-left-side``)."""
 _TRAIN_COMMANDS = {
     "frontal": "posedrift train --classifier net",
     "turned": "posedrift train --classifier net --wide-share 1 --wide-yaw 180",
     "high": "posedrift train --classifier net --camera-heights 0.7,2.4",
     "back": "posedrift train --classifier net --wide-share 1 --wide-yaw 180 --wide-min-yaw 120",
+    "side": "posedrift train --classifier net --wide-share 1 --wide-yaw 165 --wide-min-yaw 30 "
+    "--wide-left-side",
 }
 _KEYS = ("part_names", "metadata", "reference_focal", "background", "clip", "offsets", "n_layers")
 """What a model file holds besides its format, version and layers."""
@@ -190,6 +194,34 @@ class BodyPartNet:
         np.put(labels, flat, np.argmax(probabilities, axis=1).astype(np.int16))
         return PartPrediction(labels=labels, pixels=pixels, probabilities=probabilities)
 
+    def mirrored(self) -> BodyPartNet:
+        """The net for the mirror image: it labels a depth image as this net labels the
+        image flipped left to right, with every left part read as the right one.
+
+        A net trained on people showing their left side thus reads people showing
+        their right side (the features' column offsets negated, the output's left
+        and right parts swapped; nothing is retrained).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from posedrift.camera import camera_preset
+        >>> cam = camera_preset("kinect1-qvga")
+        >>> depth = np.zeros(cam.shape, np.float32); depth[60:200, 120:175] = 2.5
+        >>> net = BodyPartNet.load_default()
+        >>> flipped = net.predict(depth[:, ::-1].copy(), None, cam).labels[:, ::-1]
+        >>> swap = np.array([PART_NAMES.index(other_side(n)) for n in PART_NAMES])
+        >>> mirror = net.mirrored().predict(depth, None, cam).labels
+        >>> bool(np.array_equal(mirror[depth > 0], swap[flipped[depth > 0]]))
+        True
+        """
+        swap = [PART_NAMES.index(other_side(name)) for name in PART_NAMES]
+        offsets = self.offsets * np.array([1, -1, 1, -1], dtype=np.float32)
+        weights = (*self.weights[:-1], np.ascontiguousarray(self.weights[-1][:, swap]))
+        biases = (*self.biases[:-1], np.ascontiguousarray(self.biases[-1][swap]))
+        metadata = {**self.metadata, "mirrored": not self.metadata.get("mirrored", False)}
+        return replace(self, offsets=offsets, weights=weights, biases=biases, metadata=metadata)
+
     def predict_pixels(
         self,
         depth: np.ndarray,
@@ -300,7 +332,7 @@ class BodyPartNet:
 
         Parameters
         ----------
-        views : {"frontal", "turned", "high", "back"}
+        views : {"frontal", "turned", "high", "back", "side"}
             ``"frontal"``: trained on people facing the camera (within 45 degrees,
             and 30% of the frames up to 100), the net that labels the tracker's
             pixels; ``"turned"``: trained on people turned any way, up to their back
@@ -312,7 +344,10 @@ class BodyPartNet:
             asked in the frontal net's place where the camera looks down; on level
             cameras it is the worse of the two (docs/results-log.md). ``"back"``:
             the turned net's training with every view turned 120-180 degrees away, which
-            the tracker asks once its skeleton shows the person's back.
+            the tracker asks once its skeleton shows the person's back. ``"side"``:
+            every view turned 30-165 degrees with the person's left side towards the
+            camera; its :meth:`mirrored` twin reads the right side, and the tracker
+            asks one of them while its skeleton keeps a side turned to the camera.
         """
         if views not in _DEFAULT_MODELS:
             raise ValueError(
@@ -383,7 +418,11 @@ class FacingNets:
     :func:`posedrift.tracking.world_up`), ``high`` takes the frontal net's place.
     Where ``back`` is given and the skeleton has turned more than ``back_gate``
     degrees, the person shows their back and ``back`` labels: a net that saw only
-    backs need not tell a back from a front, which decides left from right.
+    backs need not tell a back from a front, which decides left from right. Where
+    ``side`` is given and the caller knows which side the person shows (the tracker:
+    a skeleton that has kept one side towards the camera), ``side`` or its
+    :meth:`~BodyPartNet.mirrored` twin takes the turned net's place, for the same
+    reason: a net that saw only left sides need not tell them from right ones.
 
     Parameters
     ----------
@@ -402,6 +441,13 @@ class FacingNets:
         Degrees in [0, 180]. The shipped back net saw turns of 120-180 degrees; the
         gate sits further out because the skeleton's own facing lags a turn (on the
         development clips 135 and 145 cost, 155 and 165 gained: docs/results-log.md).
+    side : BodyPartNet, optional
+        The net for a person turned with their left side towards the camera (anything
+        with the net's ``mirrored``): the shipped side net saw turns of 30-165 degrees.
+    side_gate : float
+        Degrees in [0, 180]: the side nets label only beyond it (and up to
+        ``back_gate``). The skeleton's facing lags a turn towards the side, where the
+        side net cost the held-out hop 131_03 at 45 degrees (docs/results-log.md).
 
     Examples
     --------
@@ -414,6 +460,10 @@ class FacingNets:
     True
     >>> nets.select(170.0) is nets.back  # the person's back to the camera
     True
+    >>> nets.select(90.0, side="left") is nets.side  # the left side to the camera
+    True
+    >>> nets.select(90.0, side="right").metadata["mirrored"]  # the side net's mirror image
+    True
     """
 
     frontal: Any
@@ -423,9 +473,12 @@ class FacingNets:
     high_gate: float = 12.0
     back: Any = None
     back_gate: float = 155.0
+    side: Any = None
+    side_gate: float = 60.0
 
     def __post_init__(self) -> None:
-        for name, top in (("turn_gate", 180.0), ("high_gate", 90.0), ("back_gate", 180.0)):
+        gates = (("turn_gate", 180.0), ("high_gate", 90.0), ("back_gate", 180.0))
+        for name, top in (*gates, ("side_gate", 180.0)):
             gate = check_scalar(
                 getattr(self, name),
                 name,
@@ -436,25 +489,39 @@ class FacingNets:
                 caller="FacingNets",
             )
             object.__setattr__(self, name, float(gate))
+        right = None if self.side is None else self.side.mirrored()
+        object.__setattr__(self, "_right_side", right)
 
     @classmethod
     def load_default(cls, turn_gate: float = 45.0) -> FacingNets:
-        """The shipped frontal, turned, high and back nets (:meth:`BodyPartNet.load_default`)."""
+        """The shipped frontal, turned, high, back and side nets
+        (:meth:`BodyPartNet.load_default`)."""
         return cls(
             BodyPartNet.load_default("frontal"),
             BodyPartNet.load_default("turned"),
             turn_gate=turn_gate,
             high=BodyPartNet.load_default("high"),
             back=BodyPartNet.load_default("back"),
+            side=BodyPartNet.load_default("side"),
         )
 
-    def select(self, facing_yaw: float | None, *, tilt: float | None = None) -> Any:
+    def select(
+        self, facing_yaw: float | None, *, tilt: float | None = None, side: str | None = None
+    ) -> Any:
         """The net for a person turned ``facing_yaw`` degrees away (None, NaN: frontal),
-        seen by a camera looking ``tilt`` degrees down (None: level)."""
+        seen by a camera looking ``tilt`` degrees down (None: level), showing their
+        ``side`` (``"left"`` or ``"right"``; None: not known) to the camera."""
+        if side not in (None, "left", "right"):
+            raise ValueError(
+                f"The 'side' parameter of FacingNets.select must be 'left', 'right' or "
+                f"None. Got {side!r} instead."
+            )
         if facing_yaw is not None:  # NaN compares False below
             if self.back is not None and facing_yaw > self.back_gate:
                 return self.back
             if facing_yaw > self.turn_gate:
+                if self.side is not None and side is not None and facing_yaw > self.side_gate:
+                    return self.side if side == "left" else self._right_side
                 return self.turned
         if self.high is not None and tilt is not None and tilt > self.high_gate:
             return self.high

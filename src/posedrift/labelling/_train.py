@@ -708,6 +708,9 @@ class SceneRanges:
         Degrees: the wide views' smallest turn (their turn is drawn uniformly between
         it and ``wide_yaw``, either way round). 0: any turn up to ``wide_yaw``; 120
         with ``wide_yaw`` 180: people seen from behind only.
+    wide_left_side : bool
+        Turn every wide view one way only, the person's left side towards the camera
+        (a net for that side; :meth:`BodyPartNet.mirrored` reads the other).
     mirror_fraction : float
         Share of frames whose pose is mirrored left for right (:func:`mirror_pose`):
         every asymmetric clip pose then also appears the other way round.
@@ -725,6 +728,7 @@ class SceneRanges:
     wide_aim: float = 25.0
     wide_yaw: float = 100.0
     wide_min_yaw: float = 0.0
+    wide_left_side: bool = False
     mirror_fraction: float = 0.0
 
     def __post_init__(self) -> None:
@@ -737,12 +741,14 @@ class SceneRanges:
     def view_yaw(self, u: float, wide: bool) -> float:
         """The person's turn in degrees for a uniform draw ``u`` in [-1, 1].
 
-        One draw either way, so that a smallest turn leaves the random stream as it was.
+        One draw either way, so that a smallest turn or one side leaves the random
+        stream as it was. A positive turn shows the person's left side.
         """
         if not wide:
             return u * self.yaw
         low = self.wide_min_yaw
-        return math.copysign(low + abs(u) * (self.wide_yaw - low), u)
+        turn = low + abs(u) * (self.wide_yaw - low)
+        return turn if self.wide_left_side else math.copysign(turn, u)
 
 
 def mirror_pose(
@@ -771,7 +777,7 @@ def mirror_pose(
     >>> bool(m[JOINT_INDEX["right_hand"], 1] > m[JOINT_INDEX["left_hand"], 1])
     True
     """
-    from posedrift.skeleton import JOINT_NAMES
+    from posedrift.skeleton import JOINT_NAMES, other_side
 
     joints = np.asarray(joints, dtype=float)
     centre = 0.5 * (
@@ -783,16 +789,11 @@ def mirror_pose(
         q[..., 0] = 2.0 * centre - q[..., 0]
         return q
 
-    def other(name: str) -> str:
-        if name.startswith("left_"):
-            return "right_" + name[5:]
-        if name.startswith("right_"):
-            return "left_" + name[6:]
-        return name
-
-    order = [JOINT_NAMES.index(other(n)) for n in JOINT_NAMES]
+    order = [JOINT_NAMES.index(other_side(n)) for n in JOINT_NAMES]
     mirrored = reflect(joints)[order]
-    extras_out = {name: reflect(extras[other(name)]) for name in extras if other(name) in extras}
+    extras_out = {
+        name: reflect(extras[other_side(name)]) for name in extras if other_side(name) in extras
+    }
     return mirrored, extras_out
 
 

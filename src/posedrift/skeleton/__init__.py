@@ -24,6 +24,7 @@ from posedrift.skeleton._definitions import (
     PART_JOINTS,
     PART_NAMES,
     SEGMENT_RATIOS,
+    other_side,
 )
 from posedrift.skeleton._smooth import smooth_joints
 from posedrift.skeleton._tpose import t_pose_joints
@@ -46,6 +47,7 @@ __all__ = [
     "facing_yaw",
     "fit_convention",
     "joint_angles",
+    "other_side",
     "pelvis_centre",
     "smooth_joints",
     "t_pose_joints",

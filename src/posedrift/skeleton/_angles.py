@@ -103,13 +103,17 @@ def angles_dict(angles: np.ndarray) -> dict[str, float | None]:
     }
 
 
-def facing_yaw(joints: np.ndarray, *, up: np.ndarray | None = None) -> np.ndarray:
+def facing_yaw(
+    joints: np.ndarray, *, up: np.ndarray | None = None, signed: bool = False
+) -> np.ndarray:
     """How far the person is turned away from the camera, in degrees.
 
     The person's facing direction is horizontal and at right angles to the line
     from the right to the left hip and shoulder (averaged); ``facing_yaw`` is its
     angle to the direction from the pelvis to the camera (the origin of the camera
     frame): 0 faces the camera, 90 a side view, 180 the back to the camera.
+    ``signed`` tells which way: positive where the person's left side is nearer the
+    camera than the right (the line from right to left points towards the camera).
 
     Parameters
     ----------
@@ -117,6 +121,8 @@ def facing_yaw(joints: np.ndarray, *, up: np.ndarray | None = None) -> np.ndarra
         Camera frame (OpenCV: +Y down), metres.
     up : (3,) float, optional
         The world's up direction in the camera frame; default ``(0, -1, 0)``.
+    signed : bool
+        Degrees in [-180, 180] instead: negative where the right side is nearer.
 
     Returns
     -------
@@ -133,10 +139,17 @@ def facing_yaw(joints: np.ndarray, *, up: np.ndarray | None = None) -> np.ndarra
     >>> turned = camera * [-1.0, 1.0, -1.0] + [0.0, 0.0, 6.0]  # turned about the vertical
     >>> round(float(facing_yaw(turned)), 6)
     180.0
+    >>> c, s = np.cos(np.radians(80)), np.sin(np.radians(80))
+    >>> left = (camera - [0, 0, 3]) @ [[c, 0, -s], [0, 1, 0], [s, 0, c]] + [0, 0, 3]
+    >>> hips = JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"]
+    >>> bool(left[hips[0], 2] < left[hips[1], 2])  # turned: the left hip nearer
+    True
+    >>> round(float(facing_yaw(left, signed=True)), 6)
+    80.0
     """
     joints = np.asarray(joints, dtype=float)
     if up is None and joints.shape == (len(JOINT_NAMES), 3):
-        return np.float64(_facing_yaw_one(joints))
+        return np.float64(_facing_yaw_one(joints, signed))
     up = np.array([0.0, -1.0, 0.0]) if up is None else np.asarray(up, dtype=float)
     j = JOINT_INDEX
     across = (
@@ -149,10 +162,13 @@ def facing_yaw(joints: np.ndarray, *, up: np.ndarray | None = None) -> np.ndarra
     facing = facing - (facing @ up)[..., None] * up
     to_camera = -pelvis_centre(joints)
     to_camera = to_camera - (to_camera @ up)[..., None] * up
-    return _angle_between(facing, to_camera)
+    yaw = _angle_between(facing, to_camera)
+    if signed:  # the across line's component towards the camera tells which side
+        yaw = np.where(np.sum(across * to_camera, axis=-1) < 0, -yaw, yaw)
+    return yaw
 
 
-def _facing_yaw_one(joints: np.ndarray) -> float:
+def _facing_yaw_one(joints: np.ndarray, signed: bool = False) -> float:
     """:func:`facing_yaw` of one skeleton with the default up, in Python floats.
 
     The tracker asks twice a frame, and NumPy's calls on small arrays cost 25 times
@@ -173,4 +189,5 @@ def _facing_yaw_one(joints: np.ndarray) -> float:
         return math.nan
     cross = abs(-ax * cx - az * cz)
     dot = az * cx + -ax * cz
-    return float(np.degrees(np.arctan2(cross, dot)))
+    yaw = float(np.degrees(np.arctan2(cross, dot)))
+    return -yaw if signed and ax * cx + az * cz < 0 else yaw

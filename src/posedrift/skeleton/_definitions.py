@@ -53,6 +53,20 @@ PART_NAMES: tuple[str, ...] = (
 
 PART_INDEX = MappingProxyType({name: i for i, name in enumerate(PART_NAMES)})
 
+
+def other_side(name: str) -> str:
+    """The left joint or part for a right one and the other way round; others as given.
+
+    >>> other_side("left_elbow"), other_side("right_forearm"), other_side("head")
+    ('right_elbow', 'left_forearm', 'head')
+    """
+    if name.startswith("left_"):
+        return "right_" + name[5:]
+    if name.startswith("right_"):
+        return "left_" + name[6:]
+    return name
+
+
 PART_COLOURS: tuple[tuple[int, int, int], ...] = (
     (230, 25, 75),  # head: red
     (60, 180, 75),  # upper_torso: green

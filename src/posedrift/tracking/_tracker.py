@@ -72,6 +72,11 @@ _FALLBACK_MARGIN = 0.03
 # Frames of measured hip widths whose median braces the pelvis (``brace_pelvis``): ten
 # seconds at 30 fps, long enough that a crossing leg's frames do not move it.
 _PELVIS_WIDTHS_KEPT = 300
+# Skeletons in a row that must show the same side to the camera before the side net
+# (FacingNets.side) labels: a skeleton whose left and right swap for a frame would
+# otherwise be confirmed by that side's net. 3 gained on the development clips over 1
+# and 8 (docs/results-log.md).
+_STEADY_SIDE_FRAMES = 3
 # The parts whose small pieces ``merge_islands`` relabels: the upper arms, whose stray
 # points in front of a hidden elbow make one. Every arm part cost the held-out clip 131_03
 # 0.4-0.9 degrees over three samples, every part the climber 001_08 2.2 (docs/results-log.md).
@@ -215,16 +220,17 @@ def _clip_index(index: np.ndarray, size: int) -> np.ndarray:
     return np.minimum(np.maximum(index, 0), size - 1)
 
 
-def _facing(joints: np.ndarray, level: np.ndarray | None = None) -> float:
+def _facing(joints: np.ndarray, level: np.ndarray | None = None, *, signed: bool = False) -> float:
     """The facing yaw of a skeleton in degrees (NaN where it is incomplete).
 
     ``level``: :func:`level_rotation` of the world's up, for a camera that is not
     level (None: level); the skeleton is turned into a level camera's frame, where
-    :func:`facing_yaw`'s default up holds.
+    :func:`facing_yaw`'s default up holds. ``signed``: negative where the skeleton
+    shows its right side.
     """
     if not np.isfinite(joints).all():
         return math.nan
-    return float(facing_yaw(joints if level is None else joints @ level))
+    return float(facing_yaw(joints if level is None else joints @ level, signed=signed))
 
 
 def _units_hint(depth: np.ndarray) -> str:
@@ -618,6 +624,8 @@ class PoseTracker:
         self._downsample_start = self._downsample_rng.bit_generator.state
         self._last_joints: np.ndarray | None = None
         self._last_centre: np.ndarray | None = None
+        # The signed facing yaw of the last skeletons (see _shown_side).
+        self._facings: deque[float] = deque(maxlen=_STEADY_SIDE_FRAMES)
         self._state: _State | None = None
         self._last_in_view: tuple[Any, Any] = (None, None)  # (state's joints, their _in_view)
         self._calibration: Calibration | None = None
@@ -771,6 +779,7 @@ class PoseTracker:
                 attempt.fit = replace(attempt.fit, confidence=0.5 * attempt.fit.confidence)
         fit = attempt.fit
         self._last_joints, self._last_centre = fit.joints, points.mean(axis=0)
+        self._facings.append(_facing(fit.joints, self._level(), signed=True))
         self._state = _State(
             points=points,
             labels=attempt.labels,
@@ -1261,9 +1270,14 @@ class PoseTracker:
                 self.forest = "geometric"
         return self.forest
 
-    def _get_labeller(self):
+    def _get_labeller(self, *, fresh: bool = False):
         """What labels pixels this frame: the part net (loaded on first use; of a
-        :class:`FacingNets` pair, the one for the last skeleton's facing) or else the forest."""
+        :class:`FacingNets` pair, the one for the last skeleton's facing) or else the forest.
+
+        ``fresh``: for a frame labelled afresh (an initialization), which asks no side
+        net: its labels decide the new skeleton's left and right, and a side taken
+        from a lost track would decide them instead.
+        """
         if self.part_net is None:
             try:
                 from posedrift.labelling import FacingNets
@@ -1276,8 +1290,26 @@ class PoseTracker:
         if hasattr(self.part_net, "select"):
             last = self._last_joints
             facing = None if last is None else _facing(last, self._level())
-            return self.part_net.select(facing, tilt=self._camera_tilt())
+            side = None if fresh else self._shown_side()
+            if side is None:  # FacingNets-like objects without sides keep working
+                return self.part_net.select(facing, tilt=self._camera_tilt())
+            return self.part_net.select(facing, tilt=self._camera_tilt(), side=side)
         return self.part_net
+
+    def _shown_side(self) -> str | None:
+        """``"left"`` or ``"right"`` where the last ``_STEADY_SIDE_FRAMES`` skeletons all
+        showed that side to the camera, turned beyond the part nets' ``turn_gate`` and
+        ``side_gate`` and short of their ``back_gate``; else None."""
+        facings = self._facings
+        if len(facings) < _STEADY_SIDE_FRAMES or getattr(self.part_net, "side", None) is None:
+            return None
+        nets = self.part_net
+        low, high = max(nets.turn_gate, nets.side_gate), nets.back_gate
+        if all(low < yaw <= high for yaw in facings):
+            return "left"
+        if all(-high <= yaw < -low for yaw in facings):
+            return "right"
+        return None
 
     def _initialize(self, depth, intr, mask, full, pixels, points, graph) -> _Attempt | None:
         """Label the frame afresh, calibrate (first time) and fit a skeleton.
@@ -1287,7 +1319,7 @@ class PoseTracker:
         the better one is kept (a labelling built from its own skeleton always looks
         consistent, so it is only a fallback).
         """
-        labeller = self._get_labeller()
+        labeller = self._get_labeller(fresh=True)
         sources = [labeller]
         if not (isinstance(labeller, str) and labeller == "geometric"):
             sources.append("geometric")
