@@ -421,7 +421,10 @@ def test_cli_train_net_is_reproducible_and_checks_its_options(tmp_path):
         np.testing.assert_array_equal(first, second)
     assert a.metadata["command"] == "posedrift train --classifier net"
     assert a.metadata["samples"] == 600 and a.metadata["epochs"] == 2
-    assert a.metadata["camera_heights"] == [0.7, 1.3]
+    assert a.metadata["camera_heights"] == [0.7, 1.3] and not a.metadata["wide_left_side"]
+    one_side = [*args, "--wide-left-side", "--out", str(tmp_path / "left.npz")]
+    assert CliRunner().invoke(app, one_side).exit_code == 0
+    assert BodyPartNet.load(tmp_path / "left.npz").metadata["wide_left_side"]
     for bad, message in (
         (["--classifier", "svm"], "--classifier must be 'forest' or 'net'"),
         (["--hidden", "16,x"], "--hidden must be positive widths"),
