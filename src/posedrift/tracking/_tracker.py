@@ -289,8 +289,10 @@ class PoseTracker:
         pixels more accurately than the forest (docs/RESULTS.md). A
         :class:`~posedrift.labelling.FacingNets` pair labels with its frontal net
         while the last skeleton faces the camera, with its turned net once that
-        skeleton has turned away beyond its ``turn_gate``, and with its back net (if
-        any) beyond its ``back_gate``. When None, the shipped nets
+        skeleton has turned away beyond its ``turn_gate``, with its back net (if any)
+        beyond its ``back_gate``, and with its side net (if any), or that net's mirror
+        image, once three skeletons in a row have shown the same side beyond its
+        ``side_gate``. When None, the shipped nets
         (``FacingNets.load_default()``, loaded lazily) if ``forest`` is None
         too, else the given forest labels, as before there was a net. ``"none"``
         (also the fallback where no net can be loaded) leaves the labels to the
