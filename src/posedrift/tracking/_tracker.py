@@ -74,7 +74,7 @@ _FALLBACK_MARGIN = 0.03
 _PELVIS_WIDTHS_KEPT = 300
 # Skeletons in a row that must show the same side to the camera before the side net
 # (FacingNets.side) labels: a skeleton whose left and right swap for a frame would
-# otherwise be confirmed by that side's net. 3 gained on the development clips over 1
+# otherwise be confirmed by that side's net. 3 gained on the development clips over 1, 5
 # and 8 (docs/results-log.md).
 _STEADY_SIDE_FRAMES = 3
 # The parts whose small pieces ``merge_islands`` relabels: the upper arms, whose stray
