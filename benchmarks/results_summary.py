@@ -90,7 +90,7 @@ def per_clip(report: dict) -> str:
 
 
 def per_view(report: dict) -> str:
-    """Mean angle error per view, the angles in view, and the median facing yaw."""
+    """Mean angle error per view, the angles in view and seen, and the median facing yaw."""
     rows = []
     for method, row in report["methods"].items():
         views = row["by_view"]
@@ -109,8 +109,31 @@ def per_view(report: dict) -> str:
             f"{fmt(inside['angle_error_mean_deg'])} ({100 * inside['angle_share']:.1f}%) / "
             f"{fmt(inside['out_of_view_angle_error_mean_deg'])}"
         )
+        seen = row.get("seen")
+        cells.append(
+            "-"
+            if seen is None
+            else f"{fmt(seen['angle_error_deg']['mean'])} ({100 * seen['angle_share']:.1f}%) / "
+            f"{fmt(seen['hidden_angle_error_mean_deg'])}"
+        )
         rows.append([method, *cells])
     header = ["method", "front", "side", "back", "angles in view (share) / out of view"]
+    return table(header + ["angles seen (share) / hidden"], rows)
+
+
+def per_angle_seen(report: dict) -> str | None:
+    """Each method's angle errors over the angles whose joints the frames show."""
+    rows = []
+    for method, row in report["methods"].items():
+        if "seen" not in row:
+            continue
+        seen = row["seen"]
+        errors = seen["angle_error_deg"]
+        cells = [fmt(errors[a]) for a in ANGLE_NAMES] + [fmt(errors["mean"])]
+        rows.append([method, *cells, f"{100 * seen['angle_share']:.1f}%"])
+    if not rows:
+        return None
+    header = ["method", *(a.replace("_", " ") for a in ANGLE_NAMES), "mean", "seen"]
     return table(header, rows)
 
 
@@ -178,6 +201,18 @@ def targets(out: Path) -> str:
                 "yes" if met else "no",
             ]
         )
+        seen = report["methods"]["cpd"].get("seen")
+        if seen is not None:  # not a target: what the frames show, for comparison
+            errors = seen["angle_error_deg"]
+            worst = max(ANGLE_NAMES, key=lambda a: errors[a])
+            rows.append(
+                [
+                    f"{label}, over the angles the frames show ({100 * seen['angle_share']:.1f}%)",
+                    f"{fmt(errors['mean'])}; largest {worst.replace('_', ' ')} "
+                    f"{fmt(errors[worst])}",
+                    "-",
+                ]
+            )
     for stem, note in (("repeats_drift", ""), ("smooth_repeats_drift", ", smoothed offline")):
         report = load(out, stem)
         if report is None:
@@ -270,6 +305,9 @@ def main(argv: list[str] | None = None) -> int:
         if len(report["sequences"]) <= MAX_CLIP_COLUMNS:
             sections += [per_clip(report), ""]
         sections += [per_view(report)]
+        seen = per_angle_seen(report)
+        if seen is not None:
+            sections += ["", "Over the angles whose joints the frames show:", "", seen]
     for stem in ("drift", "there_and_back", "repeats_drift", "smooth_repeats_drift"):
         report = load(out, stem)
         if report is not None:

@@ -8,7 +8,7 @@ import pytest
 from typer.testing import CliRunner
 
 import posedrift.evaluation._harness as harness
-from posedrift.camera import DepthFrame, backproject, camera_preset
+from posedrift.camera import DepthFrame, backproject, camera_preset, project
 from posedrift.cli import app
 from posedrift.evaluation import (
     EvaluationSequence,
@@ -192,6 +192,36 @@ def test_in_view_splits_the_errors_on_angles_whose_joints_leave_the_image():
     assert elbow["sd_deg"] == pytest.approx(np.sqrt(6 * 45.0**2 / 5), abs=1e-3)
     assert row["angle_agreement"]["right_knee"]["loa_high_deg"] == pytest.approx(0.0, abs=1e-9)
     assert "| still | +45.0 (-51.6, +141.6) | +0.0 (+0.0, +0.0) |" in text
+
+
+def test_seen_splits_the_errors_on_angles_whose_joints_are_hidden():
+    seq = _toy_sequence()
+    k = seq.frames[0].intrinsics
+    truth = seq.reference.joints[0]
+    raised = np.repeat(truth[None], len(seq.frames), axis=0)
+    hand = JOINT_NAMES.index("left_hand")
+    raised[3:, hand] = truth[JOINT_NAMES.index("left_elbow")] + [0.0, -0.3, 0.0]
+    u, v = np.rint(project(raised[3, hand][None], k)[0]).astype(int)
+    frames = list(seq.frames)
+    for t in range(3, 6):  # a board 40 cm in front of the raised hand
+        depth = frames[t].depth.copy()
+        depth[v - 3 : v + 4, u - 3 : u + 4] = 2.6
+        frames[t] = DepthFrame(depth, k, index=t)
+    ref = Reference(joints=raised, angles=joint_angles(raised), labels=seq.reference.labels)
+    seq = EvaluationSequence(name="hidden", frames=tuple(frames), reference=ref)
+    report = evaluate(
+        [seq], {"still": lambda k, forest=None: Still(truth)}, progress=False, forest=object()
+    )
+    row = report["methods"]["still"]
+    assert row["in_view"]["angle_share"] == 1.0
+    seen = row["seen"]
+    assert seen["angle_share"] == pytest.approx(1 - 3 / (6 * 8), abs=1e-4)
+    assert seen["angle_error_deg"]["mean"] == 0.0
+    assert seen["angle_error_deg"]["left_elbow"] == 0.0
+    assert seen["hidden_angle_error_mean_deg"] == pytest.approx(90.0, abs=1e-3)
+    text = markdown_table(report, paper=False)
+    assert "6.2% of the reference's angles have a joint the frames do not show" in text
+    assert "| still | 0.00 | 0.00 | 0.00 |" in text and "| 93.8% | 90.00 |" in text
 
 
 def test_parse_methods():

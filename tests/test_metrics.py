@@ -3,18 +3,28 @@
 import numpy as np
 import pytest
 
-from posedrift.camera import camera_preset
+from posedrift.camera import camera_preset, project
 from posedrift.evaluation import (
     angle_agreement,
     angle_errors,
     angles_in_view,
+    angles_seen,
     failed_frames,
     fill_forward,
+    joints_seen,
     map_at,
     markdown_table,
     mpjpe_mm,
 )
-from posedrift.skeleton import ANGLE_JOINTS, ANGLE_NAMES, JOINT_INDEX, joint_angles, t_pose_joints
+from posedrift.skeleton import (
+    ANGLE_JOINTS,
+    ANGLE_NAMES,
+    JOINT_INDEX,
+    JOINT_NAMES,
+    joint_angles,
+    t_pose_joints,
+)
+from posedrift.synthetic import build_sequence, procedural_motion
 
 
 def test_angle_errors_hand_computed():
@@ -177,3 +187,90 @@ def test_angles_in_view_needs_every_joint_of_the_angle_in_the_image():
     assert all("neck" in ANGLE_JOINTS[a] for a in ANGLE_NAMES if a.endswith(("shoulder", "hip")))
     with pytest.raises(ValueError, match="angles_in_view"):
         angles_in_view(facing, kinect)
+
+
+@pytest.fixture(scope="module")
+def t_pose_frame():
+    """The built-in motion's first frame: the renderer's T-pose, facing the camera."""
+    sequence = build_sequence(procedural_motion(), n_frames=1, rng=0)
+    return sequence.reference.joints[0], sequence.frames[0].depth, sequence.frames[0].intrinsics
+
+
+def _covered(depth, intrinsics, joint, in_front):
+    """``depth`` with a 7 x 7 pixel board ``in_front`` metres before ``joint``."""
+    u, v = np.rint(project(joint[None], intrinsics)[0]).astype(int)
+    out = depth.copy()
+    out[v - 3 : v + 4, u - 3 : u + 4] = joint[2] - in_front
+    return out
+
+
+def test_every_joint_of_a_rendered_t_pose_is_seen(t_pose_frame):
+    joints, depth, camera = t_pose_frame
+    assert joints_seen(joints[None], [depth], camera).all()  # identity
+    assert angles_seen(joints[None], [depth], camera).all()
+    # The joints lie under the body's surface: with no tolerance the deep ones are hidden.
+    bare = joints_seen(joints[None], [depth], camera, tolerance=0.0)[0]
+    assert not bare[[JOINT_INDEX[n] for n in ("torso", "right_hip", "left_hip", "head")]].any()
+
+
+def test_a_joint_behind_something_30_cm_in_front_is_hidden(t_pose_frame):
+    joints, depth, camera = t_pose_frame
+    elbow = joints[JOINT_INDEX["left_elbow"]]
+    hidden = joints_seen(joints[None], [_covered(depth, camera, elbow, 0.30)], camera)[0]
+    assert hidden.tolist() == [name != "left_elbow" for name in JOINT_NAMES]
+    angles = angles_seen(joints[None], [_covered(depth, camera, elbow, 0.30)], camera)[0]
+    assert angles.tolist() == [name not in ("left_elbow", "left_shoulder") for name in ANGLE_NAMES]
+    # 10 cm in front is within the tolerance (a joint's own flesh), as is nothing at all.
+    assert joints_seen(joints[None], [_covered(depth, camera, elbow, 0.10)], camera).all()
+    assert joints_seen(joints[None], [np.zeros_like(depth)], camera).all()
+    assert joints_seen(joints[None], [np.full_like(depth, np.nan)], camera).all()
+
+
+def test_joints_seen_needs_the_joint_in_the_image(t_pose_frame):
+    joints, depth, camera = t_pose_frame
+    frames = np.repeat(joints[None], 3, axis=0)
+    frames[1, JOINT_INDEX["left_hand"], 0] = 5.0  # far right of the image
+    frames[2, JOINT_INDEX["neck"]] = np.nan
+    seen = joints_seen(frames, [depth] * 3, camera)
+    np.testing.assert_array_equal(angles_seen(frames, [depth] * 3, camera), _per_angle(seen))
+    np.testing.assert_array_equal(
+        angles_seen(frames, [depth] * 3, camera) & angles_in_view(frames, camera),
+        angles_seen(frames, [depth] * 3, camera),
+    )
+    assert seen[1].tolist() == [name != "left_hand" for name in JOINT_NAMES]
+    assert seen[2].tolist() == [name != "neck" for name in JOINT_NAMES]
+
+
+def _per_angle(seen):
+    return np.stack(
+        [seen[:, [JOINT_INDEX[j] for j in ANGLE_JOINTS[a]]].all(axis=1) for a in ANGLE_NAMES],
+        axis=1,
+    )
+
+
+def test_a_body_turned_side_on_hides_its_far_leg():
+    sequence = build_sequence(procedural_motion(), n_frames=1, rng=0, facing=90.0)
+    joints, camera = sequence.reference.joints, sequence.frames[0].intrinsics
+    seen = joints_seen(joints, [f.depth for f in sequence.frames], camera)[0]
+    for joint in ("hip", "knee", "foot"):
+        near, far = sorted(
+            (f"left_{joint}", f"right_{joint}"), key=lambda n: joints[0, JOINT_INDEX[n], 2]
+        )
+        assert seen[JOINT_INDEX[near]] and not seen[JOINT_INDEX[far]]
+    # In a T-pose side-on the arms lie along the camera's ray: the near arm hides the far one.
+    far = (
+        "left"
+        if joints[0, JOINT_INDEX["left_hand"], 2] > joints[0, JOINT_INDEX["right_hand"], 2]
+        else "right"
+    )
+    assert not seen[[JOINT_INDEX[f"{far}_{n}"] for n in ("shoulder", "elbow", "hand")]].any()
+
+
+def test_joints_seen_rejects_mismatched_depth(t_pose_frame):
+    joints, depth, camera = t_pose_frame
+    with pytest.raises(ValueError, match="one image per reference frame"):
+        joints_seen(joints[None], [depth, depth], camera)
+    with pytest.raises(ValueError, match="Depth image 0.*shape"):
+        joints_seen(joints[None], [depth[:10]], camera)
+    with pytest.raises(ValueError, match="tolerance"):
+        joints_seen(joints[None], [depth], camera, tolerance=-0.1)

@@ -25,6 +25,7 @@ from posedrift.evaluation._metrics import (
     angle_agreement,
     angle_errors,
     angles_in_view,
+    angles_seen,
     failed_frames,
     fill_forward,
     map_at,
@@ -286,6 +287,9 @@ class SequenceRecord:
     reference: Reference
     intrinsics: Intrinsics
     frames: tuple[DepthFrame, ...] | None = None
+    angles_seen: np.ndarray | None = None
+    """``(T, 8)`` bool: the reference's angles whose joints the frames show
+    (:func:`~posedrift.evaluation.angles_seen`)."""
 
 
 @dataclass
@@ -517,6 +521,9 @@ def run_methods(
                     reference=seq.reference,
                     intrinsics=intrinsics,
                     frames=seq.frames if keep_frames else None,
+                    angles_seen=angles_seen(
+                        seq.reference.joints, [f.depth for f in seq.frames], intrinsics
+                    ),
                 )
             )
     if not records:
@@ -715,6 +722,19 @@ def _in_view(angles: np.ndarray, ref_angles: np.ndarray, in_view: np.ndarray) ->
     }
 
 
+def _seen(angles: np.ndarray, ref_angles: np.ndarray, seen: np.ndarray) -> dict:
+    """The angle errors split by whether the frames show the reference's joints."""
+    known = np.isfinite(ref_angles)
+    share = float(seen[known].mean()) if known.any() else None
+    errors = angle_errors(np.where(seen, angles, np.nan), ref_angles)
+    hidden = angle_errors(np.where(seen, np.nan, angles), ref_angles)["mean"]
+    return {
+        "angle_share": _round(share),
+        "angle_error_deg": {k: _round(v) for k, v in errors.items()},
+        "hidden_angle_error_mean_deg": _round(hidden),
+    }
+
+
 def _sequence_summary(joints: np.ndarray, reference: Reference) -> dict:
     """One method's errors on one sequence (the JSON's ``per_sequence`` entries)."""
     angles = joint_angles(joints)
@@ -749,7 +769,10 @@ def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
     reference's angles whose joints all lie in the image,
     :func:`~posedrift.evaluation.angles_in_view`, the mean angle error over them
     and over the rest: a joint outside the image leaves nothing to measure it
-    by); per sequence of at least 200 frames,
+    by), ``"seen"`` (the share of the reference's angles whose joints the frames
+    show, in the image and hidden by nothing, :func:`~posedrift.evaluation.angles_seen`;
+    the angle errors over them, per angle and their mean, and the mean over the
+    rest; where the run kept the frames' visibility); per sequence of at least 200 frames,
     ``"first_100_deg"`` and ``"last_100_deg"`` (drift).
     """
     out: dict[str, Any] = {
@@ -768,6 +791,7 @@ def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
         ref = np.concatenate([s.reference.joints for s in run.sequences])
         ref_angles = np.concatenate([s.reference.angles for s in run.sequences])
         in_view = np.concatenate([_reference_in_view(s) for s in run.sequences])
+        seen = [s.angles_seen for s in run.sequences]
         hits = sum(r.label_hits for r in per)
         counted = sum(r.label_total for r in per)
         seconds = sum(r.seconds for r in per)
@@ -800,6 +824,8 @@ def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
             "by_view": _by_view(est, ref, ref_angles),
             "in_view": _in_view(est_angles, ref_angles, in_view),
         }
+        if all(s is not None for s in seen):
+            row["seen"] = _seen(est_angles, ref_angles, np.concatenate(seen))
         if convention != "native":
             raw = np.concatenate(native)
             row["native"] = {

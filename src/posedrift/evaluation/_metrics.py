@@ -9,8 +9,11 @@ alternative that fills it with the last known pose.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
+from posedrift._validation import check_scalar
 from posedrift.camera import Intrinsics, project
 from posedrift.skeleton import ANGLE_JOINTS, ANGLE_NAMES, JOINT_INDEX, JOINT_NAMES
 
@@ -192,6 +195,31 @@ def map_at(est: np.ndarray, ref: np.ndarray, threshold: float = 0.10) -> float |
     return float(np.mean(per_joint)) if per_joint else None
 
 
+def _joints_in_image(ref: np.ndarray, intrinsics: Intrinsics) -> tuple[np.ndarray, np.ndarray]:
+    """``(T, 15)`` bool where each joint projects into the image, and ``(T, 15, 2)`` its pixel."""
+    known = np.isfinite(ref).all(axis=-1)
+    flat = np.where(known[..., None], ref, [0.0, 0.0, 1.0]).reshape(-1, 3)
+    uv = project(flat, intrinsics).reshape(*ref.shape[:2], 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inside = (
+            known
+            & (ref[..., 2] > 0)
+            & (uv[..., 0] >= 0)
+            & (uv[..., 0] < intrinsics.width)
+            & (uv[..., 1] >= 0)
+            & (uv[..., 1] < intrinsics.height)
+        )
+    return inside, uv
+
+
+def _per_angle(joints_ok: np.ndarray) -> np.ndarray:
+    """``(T, 8)``: where every joint an angle is computed from is ``joints_ok``."""
+    columns = [
+        joints_ok[:, [JOINT_INDEX[j] for j in ANGLE_JOINTS[a]]].all(axis=1) for a in ANGLE_NAMES
+    ]
+    return np.stack(columns, axis=1)
+
+
 def angles_in_view(ref: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
     """``(T, 8)`` bool: where every joint an angle is computed from lies in the image.
 
@@ -200,6 +228,7 @@ def angles_in_view(ref: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
     climber's raised arms above the top of the view, the feet below its bottom.
     The joints of each angle are :data:`posedrift.skeleton.ANGLE_JOINTS`; a joint
     is in the image where it projects into ``[0, width) x [0, height)``.
+    :func:`angles_seen` also asks that nothing hides the joints.
 
     Parameters
     ----------
@@ -222,22 +251,124 @@ def angles_in_view(ref: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
     """
     ref = np.asarray(ref, dtype=float)
     _check_same_shape(ref, ref, (0, len(JOINT_NAMES), 3), "angles_in_view")
-    known = np.isfinite(ref).all(axis=-1)
-    flat = np.where(known[..., None], ref, [0.0, 0.0, 1.0]).reshape(-1, 3)
-    uv = project(flat, intrinsics).reshape(*ref.shape[:2], 2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inside = (
-            known
-            & (ref[..., 2] > 0)
-            & (uv[..., 0] >= 0)
-            & (uv[..., 0] < intrinsics.width)
-            & (uv[..., 1] >= 0)
-            & (uv[..., 1] < intrinsics.height)
+    return _per_angle(_joints_in_image(ref, intrinsics)[0])
+
+
+SEEN_TOLERANCE = 0.20
+"""Metres the depth image's surface may lie in front of a joint with the joint still
+seen. A joint lies under its own body's surface: facing the camera in the calibration
+pose, the rendered default body's torso joint lies 13 cm behind the surface at its pixel
+(a short, wide body's 15), the hips 12 (14), the head 10-12, the shoulders 6-8, the
+elbows, knees and ankles 4-6 and the wrists 2-3. What hides a joint stands further in
+front: a forearm pointed at the camera covers its elbow from its length, 25-30 cm, and a
+trunk seen side-on its far shoulder from about the shoulders' width."""
+
+
+def joints_seen(
+    ref: np.ndarray,
+    depth: Sequence[np.ndarray],
+    intrinsics: Intrinsics,
+    *,
+    tolerance: float = SEEN_TOLERANCE,
+) -> np.ndarray:
+    """``(T, 15)`` bool: where the camera sees each reference joint.
+
+    A joint is seen where it lies in the image (as in :func:`angles_in_view`) and
+    nothing stands between it and the camera: the median depth of the readings in
+    the 3 x 3 pixels around its projection lies no more than ``tolerance`` in
+    front of it. A forearm pointed at the camera hides its elbow, an arm across the
+    chest the trunk's joints behind it, a body turned side-on its far shoulder;
+    there the frame holds no surface of the joint to measure it by. A joint with
+    no reading around its pixel (the silhouette's edge) counts as seen.
+
+    Parameters
+    ----------
+    ref : (T, 15, 3) float
+        The reference joints, camera frame, metres.
+    depth : sequence of T (H, W) float arrays
+        The frames' depth images, metres; zero or non-finite where there is no
+        reading.
+    intrinsics : Intrinsics
+        The camera that rendered or recorded the frames.
+    tolerance : float
+        Metres; see :data:`SEEN_TOLERANCE`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from posedrift.camera import Intrinsics
+    >>> from posedrift.skeleton import JOINT_INDEX, t_pose_joints
+    >>> camera = Intrinsics(fx=285.63, fy=285.63, cx=160.0, cy=120.0, width=320, height=240)
+    >>> joints = t_pose_joints(1.75) * [1.0, -1.0, -1.0] + [0.0, 0.9, 3.0]
+    >>> wall = np.full((240, 320), 3.05)  # a surface 5 cm behind the body's plane
+    >>> joints_seen(joints[None], [wall], camera).all()
+    np.True_
+    >>> board = np.full((240, 320), 2.7)  # something 30 cm in front of every joint
+    >>> joints_seen(joints[None], [board], camera)[0, JOINT_INDEX["left_elbow"]]
+    np.False_
+    """
+    ref = np.asarray(ref, dtype=float)
+    _check_same_shape(ref, ref, (0, len(JOINT_NAMES), 3), "joints_seen")
+    tolerance = check_scalar(
+        tolerance, "tolerance", low=0.0, include_low=True, caller="joints_seen"
+    )
+    if len(depth) != len(ref):
+        raise ValueError(
+            f"The 'depth' argument of joints_seen must hold one image per reference frame "
+            f"({len(ref)}). Got {len(depth)}."
         )
-    columns = [
-        inside[:, [JOINT_INDEX[j] for j in ANGLE_JOINTS[a]]].all(axis=1) for a in ANGLE_NAMES
-    ]
-    return np.stack(columns, axis=1)
+    inside, uv = _joints_in_image(ref, intrinsics)
+    seen = inside.copy()
+    steps = np.arange(-1, 2)
+    for t, image in enumerate(depth):
+        image = np.asarray(image, dtype=float)
+        if image.shape != intrinsics.shape:
+            raise ValueError(
+                f"Depth image {t} given to joints_seen has shape {image.shape}; the "
+                f"intrinsics say {intrinsics.shape}."
+            )
+        joints = np.flatnonzero(inside[t])
+        cols = np.rint(uv[t, joints, 0]).astype(np.intp)
+        rows = np.rint(uv[t, joints, 1]).astype(np.intp)
+        r = np.clip(rows[:, None, None] + steps[:, None], 0, intrinsics.height - 1)
+        c = np.clip(cols[:, None, None] + steps[None, :], 0, intrinsics.width - 1)
+        window = image[r, c].reshape(len(joints), -1)
+        window[~(np.isfinite(window) & (window > 0))] = np.nan
+        read = np.isfinite(window).any(axis=1)
+        surface = np.full(len(joints), np.inf)
+        surface[read] = np.nanmedian(window[read], axis=1)
+        seen[t, joints] = surface >= ref[t, joints, 2] - tolerance
+    return seen
+
+
+def angles_seen(
+    ref: np.ndarray,
+    depth: Sequence[np.ndarray],
+    intrinsics: Intrinsics,
+    *,
+    tolerance: float = SEEN_TOLERANCE,
+) -> np.ndarray:
+    """``(T, 8)`` bool: where the camera sees every joint an angle is computed from.
+
+    :func:`joints_seen` per joint, then :data:`posedrift.skeleton.ANGLE_JOINTS`;
+    the parameters are :func:`joints_seen`'s. An error on an angle that is not
+    seen scores how well a method guesses what the frame does not show.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from posedrift.camera import Intrinsics
+    >>> from posedrift.skeleton import JOINT_INDEX, t_pose_joints
+    >>> camera = Intrinsics(fx=285.63, fy=285.63, cx=160.0, cy=120.0, width=320, height=240)
+    >>> joints = t_pose_joints(1.75) * [1.0, -1.0, -1.0] + [0.0, 0.9, 3.0]
+    >>> depth = np.full((240, 320), 3.05)
+    >>> angles_seen(joints[None], [depth], camera)[0].all()
+    np.True_
+    >>> joints[JOINT_INDEX["left_elbow"], 2] += 0.3  # the elbow 30 cm behind the surface
+    >>> angles_seen(joints[None], [depth], camera)[0].tolist()
+    [False, True, False, True, True, True, True, True]
+    """
+    return _per_angle(joints_seen(ref, depth, intrinsics, tolerance=tolerance))
 
 
 def failed_frames(est: np.ndarray) -> np.ndarray:

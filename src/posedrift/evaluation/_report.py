@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from posedrift.evaluation._metrics import SEEN_TOLERANCE
 from posedrift.skeleton import ANGLE_NAMES
 
 PAPER_TABLE1: dict[str, tuple[float, ...]] = {
@@ -45,6 +46,31 @@ def _in_view_note(report: Mapping) -> str:
     )
 
 
+def _seen_table(report: Mapping) -> str:
+    """The angle errors over the angles whose joints the frames show, where some are hidden."""
+    rows = {name: row["seen"] for name, row in report["methods"].items() if "seen" in row}
+    shares = [v["angle_share"] for v in rows.values() if v.get("angle_share") is not None]
+    if not shares or min(shares) >= 1.0:
+        return ""
+    headers = ["Method", *(_HEADERS[a] for a in ANGLE_NAMES), "Mean", "seen", "hidden"]
+    lines = [
+        f"\n{100 * (1 - min(shares)):.1f}% of the reference's angles have a joint the frames "
+        f"do not show (outside the image, or more than {100 * SEEN_TOLERANCE:.0f} cm behind "
+        "what the camera sees: posedrift.evaluation.angles_seen). Over the angles seen, "
+        "degrees (the share seen; the mean over the hidden ones):\n",
+        "| " + " | ".join(headers) + " |",
+        "|" + "|".join(["---"] + ["---:"] * (len(headers) - 1)) + "|",
+    ]
+    for name, seen in rows.items():
+        errors = seen["angle_error_deg"]
+        cells = [name, *(_fmt(errors.get(a)) for a in ANGLE_NAMES), _fmt(errors.get("mean"))]
+        share = seen.get("angle_share")
+        cells.append("-" if share is None else f"{100 * share:.1f}%")
+        cells.append(_fmt(seen.get("hidden_angle_error_mean_deg")))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def _signed(value: float | None) -> str:
     return "-" if value is None else f"{value:+.1f}"
 
@@ -84,8 +110,9 @@ def markdown_table(report: Mapping, *, paper: bool = True) -> str:
     and failed frames. A method run several times (``evaluate(repeats=)``) shows
     its mean over the runs and their standard deviation (``mean ± sd``). Where some of
     the reference's angles have a joint outside the image, a line under the table
-    gives each method's error over the angles in view and over the rest (``in_view``).
-    A second table gives each angle's bias and 95% limits of agreement
+    gives each method's error over the angles in view and over the rest (``in_view``);
+    where some have a joint the frames do not show, a table gives the errors over the
+    angles seen (``seen``). A last table gives each angle's bias and 95% limits of agreement
     (``angle_agreement``), where the report has them.
 
     Parameters
@@ -158,7 +185,7 @@ def markdown_table(report: Mapping, *, paper: bool = True) -> str:
             f"\nEvery method's joints smoothed in time before scoring (--smooth "
             f"{report['smoothing_s']:g} s{window}; posedrift.tracking.smooth_results).\n"
         )
-    text += _in_view_note(report)
+    text += _in_view_note(report) + _seen_table(report)
     if paper:
         text += (
             "\nRows marked *paper* are the paper's Table 1, measured on its own synthetic data "
