@@ -239,6 +239,31 @@ def targets(out: Path) -> str:
     return table(["target", "measured", "met?"], rows)
 
 
+def seen_overview(out: Path) -> str | None:
+    """Per run: the share of the angles the frames show and the errors over them."""
+    rows = []
+    for stem, label in SINGLE_RUNS:
+        report = load(out, stem)
+        if report is None or "seen" not in report["methods"].get("cpd", {}):
+            continue
+        seen = report["methods"]["cpd"]["seen"]
+        errors = seen["angle_error_deg"]
+        cells = [
+            label,
+            f"{100 * seen['angle_share']:.1f}%",
+            f"{fmt(errors['mean'])} ({fmt(errors['left_elbow'])} / {fmt(errors['right_elbow'])})",
+            fmt(seen["hidden_angle_error_mean_deg"]),
+        ]
+        for method in ("icp", "shotton", "pda"):
+            row = report["methods"].get(method)
+            cells.append("-" if row is None else fmt(row["seen"]["angle_error_deg"]["mean"]))
+        rows.append(cells)
+    if not rows:
+        return None
+    header = ["run", "seen", "cpd (elbows L / R)", "cpd, hidden", "icp", "shotton", "pda"]
+    return table(header, rows)
+
+
 LABEL_FOLDERS = (
     ("h1", "007_01, 1.58 m, girth 1.15, noise"),
     ("h2", "007_05, 1.92 m, girth 0.88"),
@@ -313,6 +338,9 @@ def main(argv: list[str] | None = None) -> int:
         if report is not None:
             sections += [f"\n## Drift, first / last 100 frames (`{stem}.json`)\n"]
             sections += [drift(report)]
+    seen = seen_overview(out)
+    if seen is not None:
+        sections += ["\n## Over the angles the frames show (`seen`)\n", seen]
     pixels = labels(out)
     if pixels is not None:
         sections += ["\n## Pixel accuracy of the labels (`eval labels`)\n", pixels]
