@@ -80,12 +80,23 @@ def table(header: list[str], rows: list[list[str]]) -> str:
 
 
 def per_clip(report: dict) -> str:
-    """Each method's mean angle error per sequence, and over the angles in view."""
+    """Each method's mean angle error per sequence; the tracker's also over the angles seen."""
     names = report["sequences"]
     rows = []
     for method, row in report["methods"].items():
         cells = [fmt(row["per_sequence"][n]["angle_error_mean_deg"]) for n in names]
         rows.append([method, *cells, fmt(row["angle_error_deg"]["mean"])])
+        if method == "cpd" and "seen" in row:
+            per = [row["per_sequence"][n] for n in names]
+            cells = [
+                f"{fmt(p.get('seen_angle_error_mean_deg'))} ({100 * p['seen_angle_share']:.0f}%)"
+                if p.get("seen_angle_share") is not None
+                else "-"
+                for p in per
+            ]
+            seen = row["seen"]
+            total = f"{fmt(seen['angle_error_deg']['mean'])} ({100 * seen['angle_share']:.0f}%)"
+            rows.append(["cpd, angles seen (share)", *cells, total])
     return table(["method", *names, "all"], rows)
 
 

@@ -219,6 +219,9 @@ def test_seen_splits_the_errors_on_angles_whose_joints_are_hidden():
     assert seen["angle_error_deg"]["mean"] == 0.0
     assert seen["angle_error_deg"]["left_elbow"] == 0.0
     assert seen["hidden_angle_error_mean_deg"] == pytest.approx(90.0, abs=1e-3)
+    per = row["per_sequence"]["hidden"]
+    assert per["seen_angle_share"] == seen["angle_share"]
+    assert per["seen_angle_error_mean_deg"] == 0.0
     text = markdown_table(report, paper=False)
     assert "6.2% of the reference's angles have a joint the frames do not show" in text
     assert "| still | 0.00 | 0.00 | 0.00 |" in text and "| 93.8% | 90.00 |" in text

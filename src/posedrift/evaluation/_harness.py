@@ -735,15 +735,21 @@ def _seen(angles: np.ndarray, ref_angles: np.ndarray, seen: np.ndarray) -> dict:
     }
 
 
-def _sequence_summary(joints: np.ndarray, reference: Reference) -> dict:
+def _sequence_summary(joints: np.ndarray, record: SequenceRecord) -> dict:
     """One method's errors on one sequence (the JSON's ``per_sequence`` entries)."""
+    reference = record.reference
     angles = joint_angles(joints)
-    return {
+    out = {
         "angle_error_mean_deg": _round(angle_errors(angles, reference.angles)["mean"]),
         "mpjpe_mm": _round(mpjpe_mm(joints, reference.joints), 2),
         "failed_frames": int(np.count_nonzero(failed_frames(joints))),
         **_drift(angles, reference.angles),
     }
+    if record.angles_seen is not None:
+        seen = _seen(angles, reference.angles, record.angles_seen)
+        out["seen_angle_share"] = seen["angle_share"]
+        out["seen_angle_error_mean_deg"] = seen["angle_error_deg"]["mean"]
+    return out
 
 
 def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
@@ -816,7 +822,7 @@ def summarize(run: EvaluationRun, *, convention: str = "native") -> dict:
                 "map_10cm": _round(map_at(filled, ref, 0.10)),
             },
             "per_sequence": {
-                s.name: _sequence_summary(j, s.reference)
+                s.name: _sequence_summary(j, s)
                 for s, j in zip(run.sequences, converted, strict=True)
             },
             "method_errors": sum(len(r.errors) for r in per),
